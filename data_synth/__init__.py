@@ -1,0 +1,1 @@
+"""Build and check the synthetic regression puzzles (smoke set for tests, bench set for benchmarks)."""

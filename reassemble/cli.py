@@ -1,0 +1,170 @@
+"""Command line: parsing only. Heavy libraries are imported inside the commands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from . import __version__
+from .errors import ReassembleError
+
+log = logging.getLogger("reassemble")
+
+
+def _int_at_least(low: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be at least {low} (got {value})")
+        return value
+
+    return parse
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+
+
+def _cmd_break(args: argparse.Namespace) -> int:
+    from .pipeline import break_to_folder
+    from .synth import BreakParams
+
+    params = BreakParams(
+        pieces=args.pieces, roughness=args.roughness, resolution=args.resolution, noise=args.noise,
+        chips=args.chips, chip_size=args.chip_size, decimate=args.decimate, scale=args.scale,
+    )
+    out = break_to_folder(args.mesh, args.out, params=params, seed=args.seed, force=args.force)
+    print(f"wrote {args.pieces} fragments and the ground truth to {out}/")
+    return 0
+
+
+def _format_report(report: dict) -> str:
+    rows = [
+        ("part accuracy (Breaking Bad)", "part_acc", "{:.3f}"),
+        ("part accuracy (strict, 1% diag)", "part_acc_strict", "{:.3f}"),
+        ("rotation RMSE, Euler (deg)", "rot_rmse_euler_deg", "{:.2f}"),
+        ("rotation, geodesic RMSE (deg)", "rot_geodesic_rmse_deg", "{:.2f}"),
+        ("translation RMSE (unit box)", "trans_rmse", "{:.4f}"),
+        ("shape chamfer (unit box, sq.)", "shape_cd", "{:.2e}"),
+        ("solved (all strict-correct)", "solved", "{}"),
+    ]
+    modes = [m for m in ("as_given", "anchor_largest", "best_anchor") if m in report["alignments"]]
+    width = 34
+    lines = [
+        f"{report['n_placed']}/{report['n_fragments']} fragments placed"
+        + (f"; missing from prediction: {', '.join(report['missing'])}" if report["missing"] else ""),
+        f"{'':{width}}" + "".join(f"{m:>16}" for m in modes),
+    ]
+    for label, key, fmt in rows:
+        cells = "".join(f"{fmt.format(report['alignments'][m]['summary'][key]):>16}" for m in modes)
+        lines.append(f"{label:{width}}{cells}")
+    anchors = [report["alignments"][m].get("anchor") for m in modes[1:]]
+    lines.append(f"{'anchor fragment':{width}}" + "".join(f"{a or '-':>16}" for a in [None] + anchors))
+    return "\n".join(lines)
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from .io import write_json
+    from .pipeline import evaluate_files
+
+    report = evaluate_files(args.predicted, args.ground_truth, n_points=args.points, seed=args.seed)
+    if args.out:
+        write_json(args.out, report)
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        print(_format_report(report))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="reassemble",
+        description="Put broken 3D objects back together.",
+    )
+    parser.add_argument("--version", action="version", version=f"reassemble {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p = sub.add_parser(
+        "break",
+        help="break a closed mesh into a synthetic puzzle with ground truth",
+        description="Cut a closed mesh into fragments along rough, multi-scale surfaces "
+        "(manifold3d booleans), pose them at random and write the ground truth. "
+        "Lengths are fractions of the object's bounding-box diagonal.",
+    )
+    p.add_argument("mesh", help="closed mesh file, or the name of a bundled mesh (e.g. spot, torus)")
+    p.add_argument("--pieces", type=_int_at_least(2), required=True, help="number of fragments (>= 2)")
+    p.add_argument("--seed", type=_int_at_least(0), default=0, help="random seed (default 0)")
+    p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
+    p.add_argument("--force", action="store_true", help="replace an existing output folder")
+    p.add_argument("--roughness", type=_number, default=0.08,
+                   help="RMS height of the cut surfaces / radius of the piece cut (default 0.08)")
+    p.add_argument("--resolution", type=_number, default=0.008,
+                   help="edge length of cut surfaces / object diagonal (default 0.008)")
+    p.add_argument("--noise", type=_number, default=0.0,
+                   help="Gaussian vertex noise sigma / object diagonal (default 0)")
+    p.add_argument("--chips", type=_number, default=0.0,
+                   help="mean number of chips knocked off each fragment's break edge (default 0)")
+    p.add_argument("--chip-size", type=_number, default=0.02,
+                   help="typical chip radius / object diagonal (default 0.02)")
+    p.add_argument("--decimate", type=_number, default=0.0,
+                   help="simplify fragments to this tolerance / object diagonal (default 0: off)")
+    p.add_argument("--scale", type=_number, default=1.0,
+                   help="scale the mesh first, e.g. 1000 for metres to millimetres (default 1)")
+    p.set_defaults(func=_cmd_break)
+
+    p = sub.add_parser(
+        "eval",
+        help="score a transforms.json against a puzzle's ground truth",
+        description="Score predicted fragment poses: Breaking Bad metrics (part accuracy, "
+        "Euler RMSE, translation RMSE, shape chamfer), strict part accuracy and geodesic "
+        "rotation error, with the prediction as given and anchored on one fragment.",
+    )
+    p.add_argument("predicted", type=Path, help="transforms.json (convention T_world_fragment)")
+    p.add_argument("ground_truth", type=Path, help="ground_truth.json of the puzzle (fragments/ beside it)")
+    p.add_argument("--json", action="store_true", help="print the full report as JSON")
+    p.add_argument("--out", type=Path, help="also write the full report to this JSON file")
+    p.add_argument("--points", type=_int_at_least(10), default=1000, help="points sampled per fragment")
+    p.add_argument("--seed", type=_int_at_least(0), default=0, help="seed of the point samples")
+    p.set_defaults(func=_cmd_eval)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return args.func(args)
+    except ReassembleError as exc:
+        print(f"reassemble: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("reassemble: interrupted; nothing half-written was left behind", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug: one line for users, the traceback with --debug
+        if args.debug:
+            raise
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        print(
+            f"reassemble: internal error: {type(exc).__name__}: {msg} (rerun with --debug for details)",
+            file=sys.stderr,
+        )
+        return 1

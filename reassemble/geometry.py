@@ -1,0 +1,132 @@
+"""Small geometric primitives shared by every stage: rigid transforms, areas, surface sampling.
+
+Transforms are 4x4 homogeneous matrices acting on column vectors and are named by
+direction: ``T_world_fragment`` maps fragment coordinates to world coordinates.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def make_transform(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Build a 4x4 rigid transform.
+
+    Parameters
+    ----------
+    R : (3, 3) float
+        Rotation matrix.
+    t : (3,) float
+        Translation.
+
+    Returns
+    -------
+    T : (4, 4) float
+    """
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = t
+    return T
+
+
+def invert_transform(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform (exact for rotations, no general matrix inverse)."""
+    R = T[:3, :3]
+    return make_transform(R.T, -R.T @ T[:3, 3])
+
+
+def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 transform to (n, 3) points; returns a new (n, 3) array."""
+    points = np.asarray(points, dtype=np.float64)
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A rotation matrix drawn uniformly from SO(3)."""
+    return Rotation.random(random_state=rng).as_matrix()
+
+
+def is_rigid(T: np.ndarray, *, atol: float = 1e-6) -> bool:
+    """True when ``T`` is a finite 4x4 proper rigid transform."""
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        return False
+    R = T[:3, :3]
+    return (
+        np.allclose(R.T @ R, np.eye(3), atol=atol)
+        and abs(np.linalg.det(R) - 1.0) < atol
+        and np.allclose(T[3], [0, 0, 0, 1], atol=atol)
+    )
+
+
+def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
+    """Geodesic angle in degrees between rotations, batched over leading axes.
+
+    Parameters
+    ----------
+    R_a, R_b : (..., 3, 3) float
+
+    Returns
+    -------
+    angle : (...) float, in [0, 180]
+    """
+    R_rel = np.swapaxes(R_a, -1, -2) @ R_b
+    # atan2 of the skew and symmetric parts: accurate near 0 and 180 degrees, unlike arccos
+    skew = np.stack([R_rel[..., 2, 1] - R_rel[..., 1, 2], R_rel[..., 0, 2] - R_rel[..., 2, 0],
+                     R_rel[..., 1, 0] - R_rel[..., 0, 1]], axis=-1)
+    sin2 = np.linalg.norm(skew, axis=-1)
+    cos2 = np.trace(R_rel, axis1=-2, axis2=-1) - 1.0
+    return np.degrees(np.arctan2(sin2, cos2))
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area of each triangle: (m,) from (n, 3) vertices and (m, 3) faces."""
+    v = vertices[faces]
+    return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+
+def sample_surface(
+    vertices: np.ndarray, faces: np.ndarray, count: int, *, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points drawn uniformly by area on a triangle mesh.
+
+    Returns
+    -------
+    points : (count, 3) float
+    face_index : (count,) int, the triangle each point lies on
+    """
+    areas = face_areas(vertices, faces)
+    cdf = np.cumsum(areas)
+    face_index = np.searchsorted(cdf, rng.random(count) * cdf[-1], side="right")
+    face_index = np.minimum(face_index, len(faces) - 1)
+    u, v = rng.random((2, count))
+    flip = u + v > 1.0
+    u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
+    tri = vertices[faces[face_index]]
+    points = tri[:, 0] + u[:, None] * (tri[:, 1] - tri[:, 0]) + v[:, None] * (tri[:, 2] - tri[:, 0])
+    return points, face_index
+
+
+def canonical_order(
+    vertices: np.ndarray, faces: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Reorder vertices lexicographically and faces by their vertex indices.
+
+    Makes files byte-identical whatever order a (multi-threaded) library produced.
+
+    Returns
+    -------
+    vertices : (n, 3) reordered copy
+    faces : (m, 3) re-indexed, each rotated to start at its smallest index, rows sorted
+    face_order : (m,) int, ``faces_new[i]`` came from ``faces[face_order[i]]``
+    """
+    v_order = np.lexsort(vertices.T[::-1])
+    new_index = np.empty_like(v_order)
+    new_index[v_order] = np.arange(len(v_order))
+    f = new_index[faces]
+    shift = np.argmin(f, axis=1)
+    rows = np.arange(len(f))[:, None]
+    f = f[rows, (shift[:, None] + np.arange(3)) % 3]  # keep orientation
+    face_order = np.lexsort(f.T[::-1])
+    return vertices[v_order], f[face_order], face_order

@@ -1,0 +1,297 @@
+"""Reading meshes and writing results, the only place that knows file formats.
+
+Every writer is atomic: data goes to a temporary file beside the target and is
+renamed over it, so a crash never leaves a half-written file behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from .errors import ReassembleError
+
+log = logging.getLogger(__name__)
+
+MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf")
+BUNDLED_DIR = Path(__file__).parent / "data" / "meshes"
+TRANSFORMS_CONVENTION = "T_world_fragment"
+
+
+@dataclass(frozen=True)
+class MeshData:
+    """A welded triangle mesh.
+
+    Attributes
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int64, counter-clockwise seen from outside
+    path : where it was read from
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    path: Path
+
+
+def bundled_meshes() -> dict[str, Path]:
+    """Names (file stems, lower case) of the meshes shipped with the package."""
+    return {
+        p.stem.lower(): p for p in sorted(BUNDLED_DIR.iterdir()) if p.suffix.lower() in MESH_SUFFIXES
+    }
+
+
+def resolve_mesh_path(spec: str | os.PathLike) -> Path:
+    """A path as given, or the bundled mesh of that name (``spot``, ``torus``, ...)."""
+    path = Path(spec)
+    if path.exists():
+        return path
+    bundled = bundled_meshes()
+    if str(spec).lower() in bundled:
+        return bundled[str(spec).lower()]
+    names = ", ".join(bundled)
+    raise ReassembleError(f"{spec}: no such file (nor a bundled mesh; bundled: {names})")
+
+
+def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: bool = True) -> MeshData:
+    """Read a mesh file, weld coincident vertices and check it.
+
+    Vertices are welded by position only, so OBJ files whose UV seams split vertices
+    close up again. Faces that collapse (repeated vertex) and duplicate faces are
+    dropped; thin but valid slivers are kept, since removing them would open the mesh.
+    A closed mesh whose faces point inwards is flipped.
+
+    Parameters
+    ----------
+    path : a .ply .obj .stl .off .glb or .gltf file
+    require_closed : refuse meshes with boundary or non-manifold edges
+    weld : weld and clean as above; ``False`` keeps vertices and faces exactly as stored
+        (for files whose per-face data must stay aligned, such as puzzle fragments)
+
+    Raises
+    ------
+    ReassembleError
+        One line naming the file and the problem.
+    """
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise ReassembleError(f"{path}: no such file")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise ReassembleError(
+            f"{path}: unsupported file type {path.suffix!r} (use one of {' '.join(MESH_SUFFIXES)})"
+        )
+    if path.stat().st_size == 0:
+        raise ReassembleError(f"{path}: file is empty")
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False, skip_materials=True)
+        vertices = np.asarray(loaded.vertices, dtype=np.float64)
+        faces = np.asarray(loaded.faces, dtype=np.int64)
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ReassembleError(f"{path}: cannot read mesh ({first})") from None
+    if faces.ndim != 2 or len(faces) == 0 or len(vertices) < 3:
+        raise ReassembleError(f"{path}: contains no triangles")
+    if faces.shape[1] != 3:
+        raise ReassembleError(f"{path}: faces are not triangles")
+    if not np.all(np.isfinite(vertices)):
+        raise ReassembleError(f"{path}: has NaN or infinite vertex coordinates")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise ReassembleError(f"{path}: faces refer to missing vertices")
+
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=weld, validate=False)
+    if weld:
+        f = mesh.faces
+        collapsed = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+        mesh.update_faces(~collapsed)
+        mesh.update_faces(mesh.unique_faces())
+        mesh.remove_unreferenced_vertices()
+        if len(mesh.faces) == 0:
+            raise ReassembleError(f"{path}: all triangles are degenerate")
+
+    if require_closed:
+        edges = np.sort(mesh.edges, axis=1)
+        _, counts = np.unique(edges, axis=0, return_counts=True)
+        n_open = int(np.sum(counts == 1))
+        n_nonmanifold = int(np.sum(counts > 2))
+        if n_open or n_nonmanifold:
+            what = []
+            if n_open:
+                what.append(f"{n_open} boundary edges")
+            if n_nonmanifold:
+                what.append(f"{n_nonmanifold} non-manifold edges")
+            raise ReassembleError(
+                f"{path}: mesh is not a closed manifold after welding ({', '.join(what)}); "
+                "a watertight solid is needed (fill its holes first)"
+            )
+        if not mesh.is_winding_consistent:
+            raise ReassembleError(f"{path}: inconsistent face orientation (not an oriented solid)")
+        if mesh.volume < 0:
+            mesh.invert()
+    return MeshData(
+        vertices=np.asarray(mesh.vertices, dtype=np.float64).copy(),
+        faces=np.asarray(mesh.faces, dtype=np.int64).copy(),
+        path=path,
+    )
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results are for sharing
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+_NUMBER_LIST = re.compile(r"\[\s*(-?[\d.eE+-]+(?:\s*,\s*-?[\d.eE+-]+)*)\s*\]")
+
+
+def dumps_json(obj: Any) -> str:
+    """JSON with one key per line but short lists of numbers (matrix rows) kept on one line."""
+    text = json.dumps(obj, indent=1, allow_nan=False)
+    return _NUMBER_LIST.sub(lambda m: "[" + ", ".join(x.strip() for x in m.group(1).split(",")) + "]", text)
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write JSON atomically, with a trailing newline, keys in insertion order."""
+    _atomic_write(Path(path), (dumps_json(obj) + "\n").encode())
+
+
+def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
+    """Write a compressed ``.npz`` atomically (byte-identical for identical arrays)."""
+    import io as _io
+    import zipfile
+
+    buf = _io.BytesIO()
+    # np.savez stamps the current time into the zip; a fixed date keeps output reproducible.
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name, arr in arrays.items():
+            b = _io.BytesIO()
+            np.save(b, np.ascontiguousarray(arr), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            zf.writestr(info, b.getvalue())
+    _atomic_write(Path(path), buf.getvalue())
+
+
+def write_ply(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Write a binary little-endian PLY (float64 positions, int32 indices) atomically."""
+    vertices = np.ascontiguousarray(vertices, dtype="<f8")
+    faces = np.asarray(faces)
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"element vertex {len(vertices)}\n"
+        "property double x\nproperty double y\nproperty double z\n"
+        f"element face {len(faces)}\n"
+        "property list uchar int vertex_indices\nend_header\n"
+    ).encode()
+    face_rec = np.empty(len(faces), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    face_rec["n"] = 3
+    face_rec["i"] = faces
+    _atomic_write(Path(path), header + vertices.tobytes() + face_rec.tobytes())
+
+
+def read_json(path: str | os.PathLike, *, what: str) -> Any:
+    """Read a JSON file, with a one-line error that says what the file should have been."""
+    path = Path(path)
+    if not path.is_file():
+        raise ReassembleError(f"{path}: no such file (expected {what})")
+    try:
+        return json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ReassembleError(f"{path}: not valid JSON ({exc}); expected {what}") from None
+
+
+def read_transforms(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
+    """Read a ``transforms.json`` (or a ``ground_truth.json``, which has the same layout).
+
+    Returns
+    -------
+    dict
+        file stem -> ``{"transform": (4, 4) ndarray, "placed": bool, "confidence": float}``
+    """
+    path = Path(path)
+    data = read_json(path, what="a transforms.json with per-fragment T_world_fragment")
+    if not isinstance(data, dict) or not isinstance(data.get("fragments"), dict):
+        raise ReassembleError(f"{path}: no 'fragments' object (expected a transforms.json)")
+    convention = data.get("convention", TRANSFORMS_CONVENTION)
+    if convention != TRANSFORMS_CONVENTION:
+        raise ReassembleError(
+            f"{path}: convention {convention!r} is not supported (use {TRANSFORMS_CONVENTION!r})"
+        )
+    out: dict[str, dict[str, Any]] = {}
+    for name, entry in data["fragments"].items():
+        if not isinstance(entry, dict) or "transform" not in entry:
+            raise ReassembleError(f"{path}: fragment {name!r} has no 'transform'")
+        try:
+            T = np.asarray(entry["transform"], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ReassembleError(f"{path}: fragment {name!r}: transform is not numeric") from None
+        from .geometry import is_rigid
+
+        if not is_rigid(T, atol=1e-4):
+            raise ReassembleError(
+                f"{path}: fragment {name!r}: transform is not a 4x4 rigid motion (row-major)"
+            )
+        out[name] = {
+            "transform": T,
+            "placed": bool(entry.get("placed", True)),
+            "confidence": float(entry.get("confidence", 1.0)),
+        }
+    return out
+
+
+@contextlib.contextmanager
+def staged_directory(out: str | os.PathLike, *, force: bool = False) -> Iterator[Path]:
+    """Build an output folder in a temporary sibling and move it into place on success.
+
+    An existing ``out`` is refused unless ``force``; with ``force`` it is replaced only
+    once the new folder is complete, so a failure never destroys earlier results.
+    """
+    out = Path(out)
+    if out.exists() and not force:
+        raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
+    parent = out.parent if str(out.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
+        os.chmod(staging, 0o777 & ~_umask())
+    except OSError as exc:
+        raise ReassembleError(f"{out}: cannot create output folder ({exc.strerror})") from None
+    try:
+        yield staging
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+            os.replace(out, old / "previous")
+            os.replace(staging, out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(staging, out)
+    finally:
+        if staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Set up reassemble in ./.venv and run the demo.  Usage: ./setup.sh [--no-demo]
+set -euo pipefail
+cd "$(dirname "$0")"
+
+PYTHON=${PYTHON:-python3}
+if ! command -v "$PYTHON" >/dev/null 2>&1; then
+  echo "setup: $PYTHON not found; install Python 3.10 or newer (Debian/Ubuntu: apt-get install python3 python3-venv)" >&2
+  exit 1
+fi
+
+# open3d links against libusb-1.0 at import time; Debian/Ubuntu do not always ship it.
+if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+  echo "setup: installing the system library libusb-1.0-0 (open3d needs it)"
+  SUDO=""
+  [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libusb-1.0-0 >/dev/null
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv"
+  "$PYTHON" -m venv .venv
+fi
+echo "setup: installing reassemble and its dependencies into .venv"
+.venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip
+.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]"
+
+if [ "${1:-}" != "--no-demo" ]; then
+  # Demo until `reassemble run` exists: break a bundled mesh, then score its ground truth.
+  demo=out/demo
+  echo "setup: demo: breaking the bundled cow into 8 fragments in $demo/"
+  .venv/bin/reassemble break spot --pieces 8 --seed 1 --out "$demo" --force
+  .venv/bin/reassemble eval "$demo/ground_truth.json" "$demo/ground_truth.json"
+fi
+echo "setup: done. Run the tests with: .venv/bin/python -m pytest -q"

@@ -1,0 +1,104 @@
+"""The command line: the commands work, and bad input gets one line, no traceback, nothing written."""
+
+import hashlib
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+
+from reassemble.cli import main
+
+
+def run(*args):
+    """The real console entry point, so what users see is what is tested."""
+    proc = subprocess.run([sys.executable, "-m", "reassemble", *map(str, args)],
+                          capture_output=True, text=True, timeout=300)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def assert_one_line_error(rc, err, *words):
+    assert rc != 0
+    assert "Traceback" not in err
+    lines = [line for line in err.strip().splitlines() if line.strip()]
+    assert len(lines) == 1 or lines[0].startswith("usage:"), err
+    for w in words:
+        assert w in err, err
+
+
+def test_break_then_eval(tmp_path):
+    rc, out, err = run("break", "torus", "--pieces", 3, "--seed", 2, "--out", tmp_path / "p")
+    assert rc == 0, err
+    assert (tmp_path / "p" / "ground_truth.json").is_file()
+    assert len(list((tmp_path / "p" / "fragments").glob("*.ply"))) == 3
+    gt = tmp_path / "p" / "ground_truth.json"
+    rc, out, err = run("eval", gt, gt, "--out", tmp_path / "score.json")
+    assert rc == 0, err
+    assert "part accuracy" in out and "1.000" in out
+    report = json.loads((tmp_path / "score.json").read_text())
+    assert report["alignments"]["anchor_largest"]["summary"]["part_acc_strict"] == 1.0
+
+
+def test_existing_output_is_refused_then_replaced_with_force(tmp_path):
+    out = tmp_path / "p"
+    assert main(["break", "torus", "--pieces", "2", "--out", str(out)]) == 0
+    before = (out / "ground_truth.json").read_bytes()
+    rc, _, err = run("break", "torus", "--pieces", 3, "--out", out)
+    assert_one_line_error(rc, err, str(out), "--force")
+    assert (out / "ground_truth.json").read_bytes() == before
+    assert main(["break", "torus", "--pieces", "3", "--out", str(out), "--force"]) == 0
+    assert len(list((out / "fragments").glob("*.ply"))) == 3
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "staging folders left behind"
+
+
+def _open_mesh(path):
+    box = trimesh.creation.box()
+    trimesh.Trimesh(box.vertices, box.faces[:-2]).export(path)
+
+
+@pytest.mark.parametrize(
+    "make,words",
+    [
+        (lambda p: p.write_bytes(b""), ["empty"]),
+        (lambda p: p.write_bytes(np.random.default_rng(0).bytes(2000)), ["cannot read"]),
+        (_open_mesh, ["not a closed manifold", "boundary edges"]),
+        (lambda p: p.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                "property float y\nproperty float z\nelement face 1\n"
+                                "property list uchar int vertex_indices\nend_header\n"
+                                "0 0 0\nnan 1 0\n0 0 1\n3 0 1 2\n"), ["NaN"]),
+    ],
+    ids=["empty", "random-bytes", "open", "nan"],
+)
+def test_bad_mesh_gets_one_line_and_is_untouched(tmp_path, make, words):
+    path = tmp_path / "bad.ply"
+    make(path)
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    rc, _, err = run("break", path, "--pieces", 3, "--out", tmp_path / "out")
+    assert_one_line_error(rc, err, "bad.ply", *words)
+    assert hashlib.sha256(path.read_bytes()).hexdigest() == digest
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_options(tmp_path):
+    rc, _, err = run("break", "torus", "--pieces", 1, "--out", tmp_path / "o")
+    assert_one_line_error(rc, err, "--pieces")
+    rc, _, err = run("break", "torus", "--pieces", 3, "--roughness", "-2", "--out", tmp_path / "o")
+    assert_one_line_error(rc, err, "--roughness")
+    rc, _, err = run("break", "no_such_mesh", "--pieces", 3, "--out", tmp_path / "o")
+    assert_one_line_error(rc, err, "no_such_mesh", "bundled")
+    assert not (tmp_path / "o").exists()
+
+
+def test_eval_bad_input(tmp_path, puzzle_dir):
+    gt = puzzle_dir / "ground_truth.json"
+    rc, _, err = run("eval", tmp_path / "missing.json", gt)
+    assert_one_line_error(rc, err, "missing.json")
+    bad = tmp_path / "transforms.json"
+    bad.write_text("{not json")
+    rc, _, err = run("eval", bad, gt)
+    assert_one_line_error(rc, err, "transforms.json", "JSON")
+    bad.write_text(json.dumps({"fragments": {"fragment_00": {"transform": [[1, 0], [0, 1]]}}}))
+    rc, _, err = run("eval", bad, gt)
+    assert_one_line_error(rc, err, "fragment_00", "rigid")

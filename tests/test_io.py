@@ -1,0 +1,68 @@
+"""Loading and writing: welding, validation, atomic outputs."""
+
+import numpy as np
+import pytest
+
+from reassemble.errors import ReassembleError
+from reassemble.io import bundled_meshes, load_mesh, read_transforms, staged_directory, write_json
+
+
+@pytest.mark.parametrize("name", sorted(bundled_meshes()))
+def test_bundled_meshes_are_closed_solids(name):
+    mesh = load_mesh(bundled_meshes()[name])
+    t = mesh.vertices[mesh.faces]
+    volume = np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6
+    assert volume > 0
+
+
+def test_obj_uv_seams_are_welded(tmp_path):
+    # a tetrahedron whose OBJ splits one vertex in two by texture coordinates
+    (tmp_path / "t.obj").write_text(
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 0 0 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 1 1\n"
+        "f 1/1 3/3 2/2\nf 5/4 2/2 4/4\nf 1/1 4/4 3/3\nf 2/2 3/3 4/4\n"
+    )
+    mesh = load_mesh(tmp_path / "t.obj")
+    assert len(mesh.vertices) == 4 and len(mesh.faces) == 4
+
+
+def test_inward_mesh_is_flipped(tmp_path):
+    import trimesh
+
+    box = trimesh.creation.box()
+    trimesh.Trimesh(box.vertices, box.faces[:, ::-1]).export(tmp_path / "inv.stl")
+    mesh = load_mesh(tmp_path / "inv.stl")
+    t = mesh.vertices[mesh.faces]
+    assert np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() > 0
+
+
+def test_failed_build_leaves_nothing(tmp_path):
+    out = tmp_path / "out"
+    with pytest.raises(RuntimeError):
+        with staged_directory(out) as tmp:
+            write_json(tmp / "a.json", {"x": 1})
+            raise RuntimeError("boom")
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_failed_rebuild_keeps_old_results(tmp_path):
+    out = tmp_path / "out"
+    with staged_directory(out) as tmp:
+        write_json(tmp / "a.json", {"v": 1})
+    with pytest.raises(RuntimeError):
+        with staged_directory(out, force=True) as tmp:
+            write_json(tmp / "a.json", {"v": 2})
+            raise RuntimeError("boom")
+    assert (out / "a.json").read_text().strip().endswith("}")
+    assert '"v": 1' in (out / "a.json").read_text()
+
+
+def test_transforms_are_validated(tmp_path):
+    p = tmp_path / "t.json"
+    write_json(p, {"convention": "T_fragment_world", "fragments": {}})
+    with pytest.raises(ReassembleError, match="convention"):
+        read_transforms(p)
+    write_json(p, {"fragments": {"a": {"transform": (2 * np.eye(4)).tolist()}}})
+    with pytest.raises(ReassembleError, match="rigid"):
+        read_transforms(p)
+    write_json(p, {"fragments": {"a": {"transform": np.eye(4).tolist(), "placed": False}}})
+    assert read_transforms(p)["a"]["placed"] is False

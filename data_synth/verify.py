@@ -84,8 +84,8 @@ def check_puzzle(puzzle: PuzzleFiles, original_vertices: np.ndarray, original_fa
             ground truth, to the other fragments' surfaces, over the object diagonal
         original_off_surface_over_diag : largest distance of an original-surface vertex
             to the original mesh, over the diagonal
-        fracture_area_on_original : share of fracture area whose centroid lies on the
-            original surface (should be ~0)
+        fracture_area_on_original : share of fracture area in faces lying wholly (vertices
+            and centroid) on the original surface (should be ~0)
         original_area_in_contact : share of original-surface area touching another fragment
     """
     gt = puzzle.ground_truth
@@ -114,8 +114,14 @@ def check_puzzle(puzzle: PuzzleFiles, original_vertices: np.ndarray, original_fa
         frac = lab == 1
         if frac.any():
             max_gap = max(max_gap, float(d_other[frac].max()))
+            # a fracture face lying wholly on the original surface would be a wrong label
+            # (slivers along the rim touch it with one edge, which is fine)
+            used = np.unique(f[frac])
+            on = np.zeros(len(v), bool)
+            on[used] = original_scene.distance(v[used]) < tol
             d_orig = original_scene.distance(centroids[frac])
-            frac_on_orig += float(areas[frac][d_orig < tol].sum())
+            wholly = on[f[frac]].all(axis=1) & (d_orig < tol)
+            frac_on_orig += float(areas[frac][wholly].sum())
             frac_area += float(areas[frac].sum())
         if (~frac).any():
             used = np.unique(f[~frac])

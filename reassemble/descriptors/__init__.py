@@ -1,0 +1,11 @@
+"""Integral invariants: voxel grids (voxelize), ball kernels (kernels), V/P/D2 -> curvatures (invariants)."""
+
+from .invariants import (  # noqa: F401
+    DescriptorParams,
+    Descriptors,
+    curvature_difference_sq,
+    integral_invariants,
+    mean_curvature,
+    robust_curvature_difference_sq,
+    robust_mean_curvature,
+)

@@ -1,0 +1,204 @@
+"""Grids for the integral invariants: anti-aliased occupancy and narrow-band squared distance.
+
+Occupancy is a linear ramp of the signed distance across the surface (exact distances
+from Open3D in a thin band, the sign from ray parity along grid columns). Measured on a
+sphere, it is 2-4x more accurate than exact partial coverage along axis rays, whose
+smoothing depends on the surface orientation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Grid origins are shifted by this fraction of a voxel so that axis-aligned faces of CAD
+# meshes, whose coordinates are often round numbers, never lie on a ray.
+_ORIGIN_JITTER = 0.1234567
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A regular grid of voxel centres ``origin + h * (i, j, k)``.
+
+    Attributes
+    ----------
+    origin : (3,) float, centre of voxel (0, 0, 0)
+    h : voxel edge length
+    shape : (nx, ny, nz)
+    """
+
+    origin: np.ndarray
+    h: float
+    shape: tuple[int, int, int]
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+    def axis(self, a: int) -> np.ndarray:
+        return self.origin[a] + self.h * np.arange(self.shape[a])
+
+
+def make_grid(bbox_min: np.ndarray, bbox_max: np.ndarray, *, h: float, margin: float) -> Grid:
+    """Grid of spacing ``h`` covering the box plus ``margin``, with FFT-friendly sizes."""
+    from scipy.fft import next_fast_len
+
+    lo = np.asarray(bbox_min, float) - margin
+    extent = np.asarray(bbox_max, float) + margin - lo
+    shape = tuple(int(next_fast_len(int(np.ceil(e / h)) + 2, real=True)) for e in extent)
+    centre = lo + extent / 2
+    origin = centre - h * (np.array(shape) - 1) / 2 + _ORIGIN_JITTER * h
+    return Grid(origin=origin, h=float(h), shape=shape)
+
+
+def make_scene(vertices: np.ndarray, faces: np.ndarray):
+    """An Open3D ray-casting scene (BVH) of a triangle mesh."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        np.ascontiguousarray(vertices, dtype=np.float32), np.ascontiguousarray(faces, dtype=np.uint32)
+    )
+    return scene
+
+
+def inside_centres(scene, grid: Grid) -> np.ndarray:
+    """Whether each voxel centre is inside the closed mesh: ray parity, one ray per column.
+
+    Rays run along z; columns where the ray meets the surface an odd number of times
+    (it grazed an edge) are decided by rays along x instead, then y.
+    """
+    import open3d as o3d
+
+    inside = np.zeros(grid.shape, bool)
+    undecided = np.ones(grid.shape[:2] + (1,), bool)  # per column of the first pass
+    for axis in (2, 0, 1):
+        a, b = [i for i in range(3) if i != axis]
+        ua, ub = np.meshgrid(grid.axis(a), grid.axis(b), indexing="ij")
+        start = grid.origin[axis] - grid.h
+        rays = np.zeros((ua.size, 6), np.float32)
+        rays[:, a], rays[:, b], rays[:, axis] = ua.ravel(), ub.ravel(), start
+        rays[:, 3 + axis] = 1.0
+        hits = scene.list_intersections(o3d.core.Tensor(rays))
+        ray_ids = hits["ray_ids"].numpy().astype(np.int64)
+        t = hits["t_hit"].numpy().astype(np.float64)
+        order = np.lexsort((t, ray_ids))
+        ray_ids, t = ray_ids[order], t[order]
+        # a ray through an edge or vertex is reported once per triangle there: one crossing
+        dup = np.zeros(len(t), bool)
+        dup[1:] = (ray_ids[1:] == ray_ids[:-1]) & (t[1:] - t[:-1] < 1e-4 * grid.h)
+        ray_ids, t = ray_ids[~dup], t[~dup]
+        counts = np.bincount(ray_ids, minlength=ua.size)
+        good = counts % 2 == 0
+        keep = good[ray_ids]
+        ray_ids, t = ray_ids[keep], t[keep]
+        n = grid.shape[axis]
+        # centre k (at k in voxel units) is inside when enter <= k < leave
+        u = (t + start - grid.origin[axis]) / grid.h
+        k_in = np.clip(np.ceil(u[0::2]), 0, n).astype(np.int64)
+        k_out = np.clip(np.ceil(u[1::2]), 0, n).astype(np.int64)
+        rid = ray_ids[0::2]
+        diff = np.zeros((ua.size, n + 1), np.int32)
+        np.add.at(diff, (rid, k_in), 1)
+        np.add.at(diff, (rid, k_out), -1)
+        column = np.cumsum(diff[:, :n], axis=1) > 0
+        perm = np.argsort([a, b, axis])
+        column = np.transpose(column.reshape(grid.shape[a], grid.shape[b], n), perm)
+        good = np.transpose(np.broadcast_to(good.reshape(grid.shape[a], grid.shape[b], 1),
+                                            (grid.shape[a], grid.shape[b], n)), perm)
+        if axis == 2:
+            inside = column.copy()
+            undecided = ~good
+        else:
+            take = undecided & good
+            inside[take] = column[take]
+            undecided &= ~good
+        if not undecided.any():
+            break
+    return inside
+
+
+def occupancy(scene, grid: Grid, *, width: float = 2.0) -> np.ndarray:
+    """Anti-aliased occupancy ``clip(0.5 - sdf / (width h), 0, 1)`` of a closed mesh.
+
+    Exact distances are computed only for voxels near the surface (where the value is
+    fractional); the sign comes from ray parity. This equals the mean, over offsets
+    t uniform in [-w/2, w/2], of the indicator of the solid grown by t: a symmetric
+    smoothing whose small curvature bias (variance w^2/12) is removed analytically
+    downstream.
+
+    Returns
+    -------
+    (nx, ny, nz) float32
+    """
+    import open3d as o3d
+    from scipy.ndimage import binary_dilation
+
+    inside = inside_centres(scene, grid)
+    boundary = np.zeros(grid.shape, bool)
+    for axis in range(3):
+        change = np.diff(inside, axis=axis)
+        lo = [slice(None)] * 3
+        hi = [slice(None)] * 3
+        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+        boundary[tuple(lo)] |= change
+        boundary[tuple(hi)] |= change
+    # boundary voxels lie within one step of the surface; the ramp reaches width/2 beyond
+    band = binary_dilation(boundary, iterations=max(1, int(np.ceil(width / 2))))
+    where = np.flatnonzero(band)
+    ijk = np.column_stack(np.unravel_index(where, grid.shape))
+    pts = (grid.origin + grid.h * ijk).astype(np.float32)
+    d = scene.compute_distance(o3d.core.Tensor(pts)).numpy().astype(np.float64)
+    sdf = np.where(inside.ravel()[where], -d, d)
+    occ = inside.astype(np.float32).ravel()
+    occ[where] = np.clip(0.5 - sdf / (width * grid.h), 0.0, 1.0)
+    return occ.reshape(grid.shape)
+
+
+def saturated_square(d: np.ndarray, r: float, band: float) -> np.ndarray:
+    """``d**2`` up to ``r``, then a C2 quartic roll-off to a constant at ``band``.
+
+    Integrals over balls of radius r around surface points see only ``d <= r``, so the
+    roll-off changes nothing exact; it only keeps the field smooth where a plain clamp
+    would leave a kink whose Gibbs ringing (measured on a sphere: 2.5x the K2 noise at
+    band = r + 3h) leaks into every ball through the band-limited kernel.
+    """
+    d = np.asarray(d, dtype=np.float64)
+    L = band - r
+    u = np.clip((d - r) / L, 0.0, 1.0)
+    a = -6.0 * r * L - 4.0 * L * L
+    b = 4.0 * r * L + 2.0 * L * L
+    tail = r * r + 2 * r * L * u + L * L * u**2 + a * u**3 / 3 + b * u**4 / 4
+    return np.where(d <= r, d * d, tail)
+
+
+def squared_distance(
+    scene, grid: Grid, *, r: float, band: float, surface_points: np.ndarray
+) -> np.ndarray:
+    """Squared distance to the surface within ``r``, rolled off smoothly to a constant at ``band``.
+
+    Exact distances are asked only for voxels within an L-infinity ``band`` of a voxel
+    holding a surface point (a separable max filter), the expensive part. Returns the
+    field minus its far value, which is ``saturated_square(band)``: the far field is
+    zero, so float32 FFTs lose nothing to a large constant.
+    """
+    import open3d as o3d
+    from scipy.ndimage import maximum_filter1d
+
+    near = np.zeros(grid.shape, bool)
+    idx = np.rint((surface_points - grid.origin) / grid.h).astype(np.int64)
+    idx = np.clip(idx, 0, np.array(grid.shape) - 1)
+    near[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    reach = int(np.ceil(band / grid.h)) + 1
+    mask = near.view(np.uint8)
+    for axis in range(3):
+        mask = maximum_filter1d(mask, size=2 * reach + 1, axis=axis)
+    where = np.flatnonzero(mask)
+    ijk = np.column_stack(np.unravel_index(where, grid.shape))
+    pts = (grid.origin + grid.h * ijk).astype(np.float32)
+    d = scene.compute_distance(o3d.core.Tensor(pts)).numpy()
+    far = float(saturated_square(np.array(band), r, band))
+    out = np.zeros(grid.size, np.float32)
+    out[where] = saturated_square(d, r, band) - far
+    return out.reshape(grid.shape)

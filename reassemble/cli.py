@@ -176,8 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--resolution", type=_number, default=8.0,
                    help="voxels per radius of the occupancy grids, at least (default 8)")
-    p.add_argument("--d2-resolution", type=_number, default=5.0,
-                   help="voxels per radius of the squared-distance grids (default 5)")
+    p.add_argument("--d2-resolution", type=_number, default=4.0,
+                   help="voxels per radius of the squared-distance grids (default 4)")
     p.add_argument("--no-d2", action="store_true", help="skip D2_r and K2 (the slow part)")
     p.add_argument("--max-memory", type=_bytes, default=4e9,
                    help="working memory allowed for one grid, e.g. 4G (default)")

@@ -102,3 +102,27 @@ def test_eval_bad_input(tmp_path, puzzle_dir):
     bad.write_text(json.dumps({"fragments": {"fragment_00": {"transform": [[1, 0], [0, 1]]}}}))
     rc, _, err = run("eval", bad, gt)
     assert_one_line_error(rc, err, "fragment_00", "rigid")
+
+
+def test_describe_writes_the_documented_arrays(tmp_path):
+    out = tmp_path / "torus.npz"
+    rc, stdout, err = run("describe", "torus", "--radii", "0.05,0.1", "--relative", "--out", out)
+    assert rc == 0, err
+    with np.load(out) as z:
+        n = len(z["vertices"])
+        assert z["radii"].shape == (2,)
+        for key in ("V", "D2", "H", "H_rob", "K2"):
+            assert z[key].shape == (n, 2) and np.isfinite(z[key]).all()
+    rc, _, err = run("describe", "torus", "--radii", "0.05", "--relative", "--out", out)
+    assert_one_line_error(rc, err, "exists", "--force")
+
+
+def test_describe_bad_input(tmp_path):
+    _open_mesh(tmp_path / "open.stl")
+    rc, _, err = run("describe", tmp_path / "open.stl", "--radii", "0.1", "--out", tmp_path / "o.npz")
+    assert_one_line_error(rc, err, "open.stl", "not a closed manifold")
+    rc, _, err = run("describe", "torus", "--radii", "-1", "--out", tmp_path / "o.npz")
+    assert_one_line_error(rc, err, "positive")
+    rc, _, err = run("describe", "torus", "--radii", "1e-4", "--out", tmp_path / "o.npz", "--max-memory", "1G")
+    assert_one_line_error(rc, err, "--max-memory")
+    assert not (tmp_path / "o.npz").exists()

@@ -178,22 +178,20 @@ def squared_distance(
 ) -> np.ndarray:
     """Squared distance to the surface within ``r``, rolled off smoothly to a constant at ``band``.
 
-    Exact distances are asked only for voxels within an L-infinity ``band`` of a voxel
-    holding a surface point (a separable max filter), the expensive part. Returns the
-    field minus its far value, which is ``saturated_square(band)``: the far field is
-    zero, so float32 FFTs lose nothing to a large constant.
+    Exact distances, the expensive part, are asked only for voxels that may lie within
+    ``band``: those whose Euclidean distance transform to a voxel holding a surface point
+    is below ``band / h`` plus half a voxel diagonal. Returns the field minus its far
+    value, ``saturated_square(band)``: the far field is zero, so float32 FFTs lose
+    nothing to a large constant.
     """
     import open3d as o3d
-    from scipy.ndimage import maximum_filter1d
+    from scipy.ndimage import distance_transform_edt
 
-    near = np.zeros(grid.shape, bool)
+    near = np.ones(grid.shape, bool)
     idx = np.rint((surface_points - grid.origin) / grid.h).astype(np.int64)
     idx = np.clip(idx, 0, np.array(grid.shape) - 1)
-    near[idx[:, 0], idx[:, 1], idx[:, 2]] = True
-    reach = int(np.ceil(band / grid.h)) + 1
-    mask = near.view(np.uint8)
-    for axis in range(3):
-        mask = maximum_filter1d(mask, size=2 * reach + 1, axis=axis)
+    near[idx[:, 0], idx[:, 1], idx[:, 2]] = False
+    mask = distance_transform_edt(near) <= band / grid.h + 0.87
     where = np.flatnonzero(mask)
     ijk = np.column_stack(np.unravel_index(where, grid.shape))
     pts = (grid.origin + grid.h * ijk).astype(np.float32)

@@ -1,0 +1,72 @@
+"""Speed and memory of the integral invariants, and how they grow with mesh size and r/h.
+
+    python benchmarks/descriptors_speed.py            # spot, loop-subdivided to 46k .. 737k vertices
+    python benchmarks/descriptors_speed.py --big      # also 2.9M vertices
+
+8 radii from 2 % to 10 % of the bounding-box diagonal (geometric), all vertices queried,
+default settings; V/P (volume descriptors) and D2 timed separately. Each configuration
+runs in a fresh process so peak memory is its own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import header  # noqa: E402
+
+CHILD = r"""
+import json, resource, sys, time
+import numpy as np, trimesh
+from reassemble.io import load_mesh
+from reassemble.descriptors import DescriptorParams, integral_invariants
+levels, d2, res = int(sys.argv[1]), sys.argv[2] == "1", float(sys.argv[3])
+m = load_mesh(sys.argv[4])
+tm = trimesh.Trimesh(m.vertices, m.faces)
+for _ in range(levels):
+    tm = tm.subdivide_loop(1)
+V, F = np.asarray(tm.vertices), np.asarray(tm.faces)
+diag = float(np.linalg.norm(np.ptp(V, axis=0)))
+radii = diag * 0.02 * 5 ** (np.arange(8) / 7)
+t = time.perf_counter()
+d = integral_invariants(V, F, radii, params=DescriptorParams(with_d2=d2, resolution=res))
+total = time.perf_counter() - t
+print(json.dumps({"vertices": len(V), "seconds": total, "timings": d.timings,
+                  "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
+"""
+
+
+def run(levels: int, d2: bool, res: float, mesh: str) -> dict:
+    out = subprocess.run([sys.executable, "-c", CHILD, str(levels), "1" if d2 else "0", str(res), mesh],
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--big", action="store_true", help="include 2.9M vertices")
+    parser.add_argument("--no-d2", action="store_true", help="time only V/P")
+    args = parser.parse_args()
+    header()
+    mesh = str(Path(__file__).resolve().parents[1] / "reassemble" / "data" / "meshes" / "spot.obj")
+    print("mesh: spot.obj loop-subdivided; radii 2-10 % of the diagonal, 8 geometric; all vertices queried")
+    print(f"{'vertices':>9} {'part':>5} {'seconds':>8} {'peak GB':>8}  stages")
+    for levels in ([1, 2, 3, 4] if args.big else [1, 2, 3]):
+        for d2 in ([False] if args.no_d2 else [False, True]):
+            r = run(levels, d2, 8.0, mesh)
+            stages = ", ".join(f"{k} {v:.2f}" for k, v in r["timings"].items() if k != "total")
+            print(f"{r['vertices']:>9} {'V+D2' if d2 else 'V,P':>5} {r['seconds']:8.2f} {r['peak_gb']:8.2f}  {stages}", flush=True)
+    print("\nr/h (voxels per radius of the occupancy grids), V/P only, 184k vertices:")
+    for res in (6.0, 8.0, 12.0, 16.0):
+        r = run(2, False, res, mesh)
+        print(f"  resolution {res:4.0f}: {r['seconds']:6.2f} s, peak {r['peak_gb']:.2f} GB", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

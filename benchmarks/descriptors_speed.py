@@ -43,7 +43,9 @@ print(json.dumps({"vertices": len(V), "seconds": total, "timings": d.timings,
 
 def run(levels: int, d2: bool, res: float, mesh: str) -> dict:
     out = subprocess.run([sys.executable, "-c", CHILD, str(levels), "1" if d2 else "0", str(res), mesh],
-                         capture_output=True, text=True, check=True)
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        return {"error": out.stderr.strip().splitlines()[-1]}
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -59,11 +61,17 @@ def main() -> int:
     for levels in ([1, 2, 3, 4] if args.big else [1, 2, 3]):
         for d2 in ([False] if args.no_d2 else [False, True]):
             r = run(levels, d2, 8.0, mesh)
+            if "error" in r:
+                print(f"  {levels} subdivisions, d2={d2}: {r['error']}")
+                continue
             stages = ", ".join(f"{k} {v:.2f}" for k, v in r["timings"].items() if k != "total")
             print(f"{r['vertices']:>9} {'V+D2' if d2 else 'V,P':>5} {r['seconds']:8.2f} {r['peak_gb']:8.2f}  {stages}", flush=True)
     print("\nr/h (voxels per radius of the occupancy grids), V/P only, 184k vertices:")
     for res in (6.0, 8.0, 12.0, 16.0):
         r = run(2, False, res, mesh)
+        if "error" in r:
+            print(f"  resolution {res:4.0f}: {r['error']}")
+            continue
         print(f"  resolution {res:4.0f}: {r['seconds']:6.2f} s, peak {r['peak_gb']:.2f} GB", flush=True)
     return 0
 

@@ -39,7 +39,7 @@ def _cmd_break(args: argparse.Namespace) -> int:
     from .synth import BreakParams
 
     params = BreakParams(
-        pieces=args.pieces, roughness=args.roughness, resolution=args.resolution, noise=args.noise,
+        pieces=args.pieces, roughness=args.roughness, cut_edge=args.cut_edge, noise=args.noise,
         chips=args.chips, chip_size=args.chip_size, decimate=args.decimate, scale=args.scale,
     )
     out = break_to_folder(args.mesh, args.out, params=params, seed=args.seed, force=args.force)
@@ -147,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace an existing output folder")
     p.add_argument("--roughness", type=_number, default=0.08,
                    help="RMS height of the cut surfaces / radius of the piece cut (default 0.08)")
-    p.add_argument("--resolution", type=_number, default=0.008,
+    p.add_argument("--cut-edge", type=_number, default=0.008,
                    help="edge length of cut surfaces / object diagonal (default 0.008)")
     p.add_argument("--noise", type=_number, default=0.0,
                    help="Gaussian vertex noise sigma / object diagonal (default 0)")
@@ -167,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Integral invariants at every (welded) vertex: V_r (volume of ball and solid), "
         "P_r (its second moment), D2_r (squared distance integral) and the curvatures they give: "
         "H (mean), H_rob (offset-robust mean), K2 = (kappa1 - kappa2)^2. Written to an .npz with "
-        "arrays vertices (n x 3), radii (m) and n x m arrays V, P, D2, H, H_rob, K2, K2_rob.",
+        "arrays vertices (n x 3), faces, radii (m) and n x m arrays V, P, D2, H, H_rob, K2.",
     )
     p.add_argument("mesh", help="closed mesh file, or the name of a bundled mesh")
     p.add_argument("--radii", type=_radii, required=True, help="comma-separated kernel radii, mesh units")

@@ -64,7 +64,7 @@ def describe_to_file(
         raise ReassembleError(f"{path}: {exc}") from None
     write_npz(
         out, vertices=d.points, faces=data.faces, radii=d.radii, V=d.V, P=d.P, D2=d.D2,
-        H=d.H, H_rob=d.H_rob, K2=d.K2, K2_rob=d.K2_rob,
+        H=d.H, H_rob=d.H_rob, K2=d.K2,
     )
     return {"vertices": len(d.points), "radii": d.radii.tolist(), "diagonal": diag, "timings": d.timings}
 

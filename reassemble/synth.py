@@ -36,7 +36,7 @@ class BreakParams:
     pieces : number of fragments, >= 2
     roughness : RMS height of a cut surface as a fraction of the radius of the piece it cuts
     hurst : Hurst exponent of the fractal cut surface (lower is rougher at small scales)
-    resolution : edge length of the cut-surface grid, fraction of the object diagonal
+    cut_edge : edge length of the cut-surface grid, fraction of the object diagonal
     noise : standard deviation of Gaussian vertex noise, fraction of the object diagonal
     chips : mean number of chipped-off losses per fragment, along the break
     chip_size : typical chip radius, fraction of the object diagonal
@@ -48,7 +48,7 @@ class BreakParams:
     pieces: int
     roughness: float = 0.08
     hurst: float = 0.6
-    resolution: float = 0.008
+    cut_edge: float = 0.008
     noise: float = 0.0
     chips: float = 0.0
     chip_size: float = 0.02
@@ -69,8 +69,8 @@ class BreakParams:
             raise ReassembleError(f"--roughness must be in (0, 0.5] (got {self.roughness})")
         if not 0.0 < self.hurst < 1.0:
             raise ReassembleError(f"hurst must be in (0, 1) (got {self.hurst})")
-        if not 1e-4 <= self.resolution <= 0.1:
-            raise ReassembleError(f"--resolution must be in [1e-4, 0.1] (got {self.resolution})")
+        if not 1e-4 <= self.cut_edge <= 0.1:
+            raise ReassembleError(f"--cut-edge must be in [1e-4, 0.1] (got {self.cut_edge})")
         if not 0 < self.chip_size <= 0.2:
             raise ReassembleError(f"--chip-size must be in (0, 0.2] (got {self.chip_size})")
         if not 0 < self.min_volume < 1:
@@ -226,7 +226,7 @@ def _split_piece(piece, *, params: BreakParams, diag: float, min_vol: float, roo
         normal /= np.linalg.norm(normal)
         center = centroid + axis * rng.uniform(-0.25, 0.25) * extent
         radius = float(np.max(np.linalg.norm(v - center, axis=1))) * 1.02
-        spacing = params.resolution * diag
+        spacing = params.cut_edge * diag
         n = int(np.clip(np.ceil(2.4 * radius / spacing) + 1, 16, 600))
         height = params.roughness * radius * fractal_heightfield(n, hurst=params.hurst, rng=rng)
         cutter = _heightfield_solid(center, _frame_from_normal(normal, rng), radius, spacing, height)

@@ -6,6 +6,5 @@ from .invariants import (  # noqa: F401
     curvature_difference_sq,
     integral_invariants,
     mean_curvature,
-    robust_curvature_difference_sq,
     robust_mean_curvature,
 )

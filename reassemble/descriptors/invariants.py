@@ -33,7 +33,7 @@ from .kernels import (
     ball_spectrum,
     bspline_eval,
     bspline_prefilter,
-    frequency_norm,
+    radial_on_grid,
     spline_integration,
 )
 from .voxelize import Grid, make_grid, make_scene, occupancy, saturated_square, squared_distance
@@ -75,8 +75,7 @@ class Descriptors:
     V, P, D2 : (n, m) volume, second moment and squared-distance integrals (D2 NaN when
         not computed)
     H, H_rob : (n, m) mean curvature, plain (Eq. 19) and offset-robust
-    K2, K2_rob : (n, m) (kappa1 - kappa2)^2, plain (Eq. 32) and with its first-order
-        offset error removed (see :func:`robust_curvature_difference_sq`)
+    K2 : (n, m) (kappa1 - kappa2)^2 (Eq. 32)
     timings : seconds per stage
     """
 
@@ -88,7 +87,6 @@ class Descriptors:
     H: np.ndarray
     H_rob: np.ndarray
     K2: np.ndarray
-    K2_rob: np.ndarray
     timings: dict = field(default_factory=dict)
 
 
@@ -105,16 +103,6 @@ def robust_mean_curvature(V: np.ndarray, P: np.ndarray, r) -> np.ndarray:
 def curvature_difference_sq(D2: np.ndarray, r) -> np.ndarray:
     """Eq. 32: (kappa1 - kappa2)^2 = (28 pi r^5 - 105 D2)/(pi r^7)."""
     return (28.0 * np.pi * r**5 - 105.0 * D2) / (np.pi * r**7)
-
-
-def robust_curvature_difference_sq(K2: np.ndarray, H: np.ndarray, H_rob: np.ndarray) -> np.ndarray:
-    """K2 with its first-order offset error removed: ``K2 - 14 H_rob (H_rob - H)``.
-
-    A query point a distance δ inside the surface moves D2_r by -(8 pi / 15) H r^5 δ, so
-    K2 by +56 H δ / r^2 (fourteen times the plain H's sensitivity, 4 δ / r^2), while V_r
-    gives the offset: ``δ = (H_rob - H) r^2 / 4``.
-    """
-    return K2 - 14.0 * H_rob * (H_rob - H)
 
 
 def _check_grid(grid: Grid, max_memory: float, what: str) -> None:
@@ -208,10 +196,9 @@ def integral_invariants(
         t = time.perf_counter()
         spectrum = rfftn(occ, workers=-1)
         del occ
-        k = frequency_norm(grid.shape, grid.h)
         kernels = []
         for i in idx:
-            kernels += list(ball_spectra(k, radii[i]))
+            kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, radii[i]))
         values = _convolve_at(spectrum, kernels, grid, points)
         # The ramp averages the solid over offsets of variance s2: V gains s2/2 * V'' and
         # P s2/2 * P'', with V'' = pi r^2 H and P'' = pi r^4 H / 2 to leading order.
@@ -240,17 +227,15 @@ def integral_invariants(
             t = time.perf_counter()
             spectrum = rfftn(sq, workers=-1)
             del sq
-            k = frequency_norm(grid.shape, grid.h)
             far = float(saturated_square(np.array(band), exact, band))
-            kernel = ball_spectrum(k, r)
+            (kernel,) = radial_on_grid(lambda k, r: (ball_spectrum(k, r),), grid.shape, grid.h, r)
             D2[:, i] = _convolve_at(spectrum, [kernel], grid, points)[:, 0] + far * 4.0 * np.pi * r**3 / 3.0
             timings["d2_fft"] = timings.get("d2_fft", 0.0) + time.perf_counter() - t
 
     timings["total"] = time.perf_counter() - t0
     H = mean_curvature(V, radii)
     H_rob = robust_mean_curvature(V, P, radii)
-    K2 = curvature_difference_sq(D2, radii)
     return Descriptors(
         points=points.copy(), radii=radii.copy(), V=V, P=P, D2=D2, H=H, H_rob=H_rob,
-        K2=K2, K2_rob=robust_curvature_difference_sq(K2, H, H_rob), timings=timings,
+        K2=curvature_difference_sq(D2, radii), timings=timings,
     )

@@ -64,6 +64,22 @@ def ball_spectra(k: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray]:
     return v, p
 
 
+def radial_on_grid(func, shape: tuple[int, int, int], h: float, *args):
+    """Evaluate radial spectra ``func(k, *args)`` on an rfftn half-spectrum, using its symmetry.
+
+    |omega| is even in the first two frequency axes, so each function is evaluated on
+    one quadrant (a quarter of the work) and mirrored. ``func`` returns a tuple of arrays.
+    """
+    nx, ny = shape[0], shape[1]
+    qx, qy = nx // 2 + 1, ny // 2 + 1
+    k = frequency_norm(shape, h)[:qx, :qy]
+    quadrant = func(k, *args)
+    # fftfreq index i >= qx holds frequency -(n - i): mirror of index n - i
+    mx = np.concatenate([np.arange(qx), nx - np.arange(qx, nx)])
+    my = np.concatenate([np.arange(qy), ny - np.arange(qy, ny)])
+    return tuple(q[mx][:, my] for q in quadrant)
+
+
 def ball_moment2_spectrum(k: np.ndarray, r: float) -> np.ndarray:
     """Fourier transform of |y|^2 on the ball of radius r, zero outside (float32)."""
     out = _radial_spectrum(np.asarray(k, np.float32) * np.float32(r), 5)

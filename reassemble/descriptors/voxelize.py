@@ -99,10 +99,10 @@ def inside_centres(scene, grid: Grid) -> np.ndarray:
         k_in = np.clip(np.ceil(u[0::2]), 0, n).astype(np.int64)
         k_out = np.clip(np.ceil(u[1::2]), 0, n).astype(np.int64)
         rid = ray_ids[0::2]
-        diff = np.zeros((ua.size, n + 1), np.int32)
+        diff = np.zeros((ua.size, n + 1), np.int8)  # intervals never overlap: values stay 0/1
         np.add.at(diff, (rid, k_in), 1)
         np.add.at(diff, (rid, k_out), -1)
-        column = np.cumsum(diff[:, :n], axis=1) > 0
+        column = np.cumsum(diff[:, :n], axis=1, dtype=np.int8) > 0
         perm = np.argsort([a, b, axis])
         column = np.transpose(column.reshape(grid.shape[a], grid.shape[b], n), perm)
         good = np.transpose(np.broadcast_to(good.reshape(grid.shape[a], grid.shape[b], 1),

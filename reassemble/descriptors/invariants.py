@@ -188,7 +188,10 @@ def integral_invariants(
     for lev in np.unique(level):
         idx = np.flatnonzero(level == lev)
         h = r_min * 2.0**lev / params.resolution
-        grid = make_grid(bbox_min, bbox_max, h=h, margin=radii[idx].max() + 4 * h)
+        # the FFT convolution is circular: a ball at the object's edge may wrap into the
+        # margin on the other side, which is empty when margin > r/2; plus the ramp and
+        # the spline stencil
+        grid = make_grid(bbox_min, bbox_max, h=h, margin=0.5 * radii[idx].max() + 4 * h)
         _check_grid(grid, params.max_memory, f"radius {radii[idx].max():g}")
         t = time.perf_counter()
         occ = occupancy(scene, grid, width=params.antialias)

@@ -59,7 +59,7 @@ class DescriptorParams:
 
     resolution: float = 8.0
     d2_resolution: float = 4.0
-    antialias: float = 3.0
+    antialias: float = 2.0
     with_d2: bool = True
     max_memory: float = 4e9
 

@@ -124,3 +124,12 @@ def test_bad_radii_and_memory_are_named():
         integral_invariants(V, F, [10.0])
     with pytest.raises(ReassembleError, match="--max-memory"):
         integral_invariants(V, F, [0.001], params=DescriptorParams(max_memory=1e8))
+
+
+def test_descriptors_are_deterministic():
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    a = integral_invariants(V, F, [0.3, 0.5])
+    b = integral_invariants(V, F, [0.3, 0.5])
+    for key in ("V", "P", "D2", "H", "H_rob", "K2"):
+        assert np.array_equal(getattr(a, key), getattr(b, key))

@@ -132,7 +132,6 @@ def occupancy(scene, grid: Grid, *, width: float = 2.0) -> np.ndarray:
     -------
     (nx, ny, nz) float32
     """
-    import open3d as o3d
     from scipy.ndimage import binary_dilation
 
     inside = inside_centres(scene, grid)
@@ -147,9 +146,7 @@ def occupancy(scene, grid: Grid, *, width: float = 2.0) -> np.ndarray:
     # boundary voxels lie within one step of the surface; the ramp reaches width/2 beyond
     band = binary_dilation(boundary, iterations=max(1, int(np.ceil(width / 2))))
     where = np.flatnonzero(band)
-    ijk = np.column_stack(np.unravel_index(where, grid.shape))
-    pts = (grid.origin + grid.h * ijk).astype(np.float32)
-    d = scene.compute_distance(o3d.core.Tensor(pts)).numpy().astype(np.float64)
+    d = _distances(scene, grid, where)
     sdf = np.where(inside.ravel()[where], -d, d)
     occ = inside.astype(np.float32).ravel()
     occ[where] = np.clip(0.5 - sdf / (width * grid.h), 0.0, 1.0)

@@ -74,7 +74,7 @@ def _cmd_describe(args: argparse.Namespace) -> int:
 
     params = DescriptorParams(
         resolution=args.resolution, d2_resolution=args.d2_resolution, with_d2=not args.no_d2,
-        max_memory=args.max_memory,
+        principal=args.principal, max_memory=args.max_memory,
     )
     summary = describe_to_file(
         args.mesh, args.out, radii=args.radii, relative=args.relative, params=params, force=args.force
@@ -179,6 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--d2-resolution", type=_number, default=4.0,
                    help="voxels per radius of the squared-distance grids (default 4)")
     p.add_argument("--no-d2", action="store_true", help="skip D2_r and K2 (the slow part)")
+    p.add_argument("--principal", action="store_true",
+                   help="also principal curvatures k1, k2, K2_cov, directions dir1 and normals "
+                   "from the covariance of ball and solid (robust to noise, unlike K2 from D2)")
     p.add_argument("--max-memory", type=_bytes, default=4e9,
                    help="working memory allowed for one grid, e.g. 4G (default)")
     p.set_defaults(func=_cmd_describe)

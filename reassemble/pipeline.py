@@ -62,10 +62,11 @@ def describe_to_file(
         d = integral_invariants(data.vertices, data.faces, radii, params=params or DescriptorParams())
     except ReassembleError as exc:
         raise ReassembleError(f"{path}: {exc}") from None
-    write_npz(
-        out, vertices=d.points, faces=data.faces, radii=d.radii, V=d.V, P=d.P, D2=d.D2,
-        H=d.H, H_rob=d.H_rob, K2=d.K2,
-    )
+    arrays = dict(vertices=d.points, faces=data.faces, radii=d.radii, V=d.V, P=d.P, D2=d.D2,
+                  H=d.H, H_rob=d.H_rob, K2=d.K2)
+    if d.K2_cov is not None:
+        arrays.update(K2_cov=d.K2_cov, k1=d.k1, k2=d.k2, dir1=d.dir1, normal=d.normal)
+    write_npz(out, **arrays)
     return {"vertices": len(d.points), "radii": d.radii.tolist(), "diagonal": diag, "timings": d.timings}
 
 

@@ -133,3 +133,22 @@ def test_descriptors_are_deterministic():
     b = integral_invariants(V, F, [0.3, 0.5])
     for key in ("V", "P", "D2", "H", "H_rob", "K2"):
         assert np.array_equal(getattr(a, key), getattr(b, key))
+
+
+def test_principal_curvatures_on_a_torus():
+    """Covariance of ball ∩ solid: k1 = 1/a around the tube, normals and directions exact."""
+    from data_synth.shapes import torus_curvatures, torus_mesh
+
+    R, a, r = 1.0, 0.45, 0.2
+    v, f = torus_mesh(R, a, target_vertices=20000)
+    q = v[:: len(v) // 150]
+    d = integral_invariants(v, f, [r], points=q, params=DescriptorParams(principal=True, with_d2=False))
+    _, K2 = torus_curvatures(q, R, a)
+    assert np.sqrt(np.mean((d.K2_cov[:, 0] - K2) ** 2)) < 0.1 * np.sqrt(np.mean(K2**2))
+    assert np.abs(d.k1[:, 0] - 1 / a).max() < 0.05 / a
+    rho = np.hypot(q[:, 0], q[:, 1])
+    centre = np.column_stack([q[:, 0] / rho * R, q[:, 1] / rho * R, np.zeros(len(q))])
+    n_true = (q - centre) / a
+    assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", d.normal[:, 0], n_true), -1, 1))).max() < 3
+    around = np.column_stack([-q[:, 1], q[:, 0], np.zeros(len(q))]) / rho[:, None]
+    assert np.abs(np.einsum("ij,ij->i", d.dir1[:, 0], around)).max() < 0.1  # k1 runs around the tube

@@ -29,6 +29,7 @@ import numpy as np
 from ..errors import ReassembleError
 from ..geometry import face_areas, sample_surface
 from .kernels import (
+    ball_moment_spectra,
     ball_spectra,
     ball_spectrum,
     bspline_eval,
@@ -54,6 +55,8 @@ class DescriptorParams:
     d2_resolution : ``r / h`` of the squared-distance grid of each radius
     antialias : width of the occupancy ramp across the surface, in voxels
     with_d2 : compute D2_r and K2 (the costly part: exact distances in a band about 2r wide)
+    principal : also principal curvatures and directions from the covariance of ball ∩ solid
+        (nine more convolutions per radius)
     max_memory : bytes of working memory allowed for one grid
     """
 
@@ -61,6 +64,7 @@ class DescriptorParams:
     d2_resolution: float = 4.0
     antialias: float = 2.0
     with_d2: bool = True
+    principal: bool = False
     max_memory: float = 4e9
 
 
@@ -76,6 +80,9 @@ class Descriptors:
         not computed)
     H, H_rob : (n, m) mean curvature, plain (Eq. 19) and offset-robust
     K2 : (n, m) (kappa1 - kappa2)^2 (Eq. 32)
+    K2_cov, k1, k2 : (n, m) with ``principal``: (kappa1 - kappa2)^2 from the covariance of
+        ball ∩ solid (offset-robust to first order), and k1 >= k2 = H_rob ± sqrt(K2_cov)/2
+    dir1, normal : (n, m, 3) with ``principal``: the direction of k1, and the outward normal
     timings : seconds per stage
     """
 
@@ -87,6 +94,11 @@ class Descriptors:
     H: np.ndarray
     H_rob: np.ndarray
     K2: np.ndarray
+    K2_cov: np.ndarray | None = None
+    k1: np.ndarray | None = None
+    k2: np.ndarray | None = None
+    dir1: np.ndarray | None = None
+    normal: np.ndarray | None = None
     timings: dict = field(default_factory=dict)
 
 
@@ -103,6 +115,38 @@ def robust_mean_curvature(V: np.ndarray, P: np.ndarray, r) -> np.ndarray:
 def curvature_difference_sq(D2: np.ndarray, r) -> np.ndarray:
     """Eq. 32: (kappa1 - kappa2)^2 = (28 pi r^5 - 105 D2)/(pi r^7)."""
     return (28.0 * np.pi * r**5 - 105.0 * D2) / (np.pi * r**7)
+
+
+def principal_from_moments(V: np.ndarray, m: np.ndarray, M: np.ndarray, r) -> tuple[np.ndarray, ...]:
+    """Curvature difference, direction of the larger curvature and outward normal from moments.
+
+    The covariance of ball ∩ solid about its barycentre has, in the principal frame, the
+    tangential eigenvalues 2 pi r^5/15 - (pi/48)(3 k1 + k2) r^6 and 2 pi r^5/15 -
+    (pi/48)(k1 + 3 k2) r^6 and the normal one 19 pi r^5/480 + O(r^6) (Pottmann et al.
+    2007), so ``k1 - k2 = 24 (lambda_b - lambda_a) / (pi r^6)``. A point off the surface
+    adds the same pi r^4 delta / 4 to both tangential eigenvalues: the difference ignores it.
+
+    Parameters
+    ----------
+    V : (n,) volume, m : (n, 3) first and M : (n, 6) second moments about the query point
+        (xx, yy, zz, xy, xz, yz), r : radius
+
+    Returns
+    -------
+    K2_cov (n,), dir1 (n, 3), normal (n, 3) outward
+    """
+    C = np.empty((len(V), 3, 3))
+    C[:, 0, 0], C[:, 1, 1], C[:, 2, 2] = M[:, 0], M[:, 1], M[:, 2]
+    C[:, 0, 1] = C[:, 1, 0] = M[:, 3]
+    C[:, 0, 2] = C[:, 2, 0] = M[:, 4]
+    C[:, 1, 2] = C[:, 2, 1] = M[:, 5]
+    C -= m[:, :, None] * m[:, None, :] / V[:, None, None]
+    lam, vec = np.linalg.eigh(C)  # ascending: the normal's is far the smallest
+    diff = 24.0 * (lam[:, 2] - lam[:, 1]) / (np.pi * r**6)
+    normal = vec[:, :, 0]
+    flip = np.einsum("ij,ij->i", normal, m) > 0  # the barycentre lies inside
+    normal[flip] *= -1.0
+    return diff * diff, vec[:, :, 1], normal
 
 
 def _check_grid(grid: Grid, max_memory: float, what: str) -> None:
@@ -183,6 +227,8 @@ def integral_invariants(
     V = np.empty((n, m))
     P = np.empty((n, m))
     D2 = np.full((n, m), np.nan)
+    if params.principal:
+        K2c, dir1, normal = np.empty((n, m)), np.empty((n, m, 3)), np.empty((n, m, 3))
     r_min = radii.min()
     level = np.floor(np.log2(radii / r_min) + 1e-9).astype(int)
     for lev in np.unique(level):
@@ -203,6 +249,11 @@ def integral_invariants(
         for i in idx:
             kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, radii[i]))
         values = _convolve_at(spectrum, kernels, grid, points)
+        if params.principal:
+            for i in idx:
+                mom = _convolve_at(spectrum, ball_moment_spectra(grid.shape, grid.h, radii[i]), grid, points)
+                j = int(np.flatnonzero(idx == i)[0])
+                K2c[:, i], dir1[:, i], normal[:, i] = principal_from_moments(values[:, 2 * j], mom[:, :3], mom[:, 3:], radii[i])
         # The ramp averages the solid over offsets of variance s2: V gains s2/2 * V'' and
         # P s2/2 * P'', with V'' = pi r^2 H and P'' = pi r^4 H / 2 to leading order.
         s2 = (params.antialias * h) ** 2 / 12.0
@@ -238,7 +289,12 @@ def integral_invariants(
     timings["total"] = time.perf_counter() - t0
     H = mean_curvature(V, radii)
     H_rob = robust_mean_curvature(V, P, radii)
-    return Descriptors(
+    out = Descriptors(
         points=points.copy(), radii=radii.copy(), V=V, P=P, D2=D2, H=H, H_rob=H_rob,
         K2=curvature_difference_sq(D2, radii), timings=timings,
     )
+    if params.principal:
+        half = 0.5 * np.sqrt(K2c)
+        out.K2_cov, out.k1, out.k2 = K2c, H_rob + half, H_rob - half
+        out.dir1, out.normal = dir1, normal
+    return out

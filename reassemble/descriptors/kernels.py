@@ -162,3 +162,65 @@ def spline_integration(shape: tuple[int, int, int], h: float) -> np.ndarray:
         * axis(shape[1], False)[None, :, None]
         * axis(shape[2], True)[None, None, :]
     )
+
+
+def _ball_derivatives(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """psi = phi'(x)/x and phi''(x) for phi(x) = (sin x - x cos x)/x^3, the ball's profile.
+
+    Series below x = 2 (the closed forms cancel there), closed forms above; float64.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    psi = np.empty_like(x)
+    dd = np.empty_like(x)
+    small = x < 2.0
+    xs = x[small]
+    p_s = np.zeros_like(xs)
+    d_s = np.zeros_like(xs)
+    term = np.ones_like(xs)  # x^(2n-2)
+    for n in range(1, 19):
+        c = (-1) ** n * 2 * n / ((2 * n + 3) * factorial(2 * n + 1))
+        p_s += c * term
+        d_s += c * (2 * n - 1) * term
+        term = term * xs * xs
+    psi[small], dd[small] = p_s, d_s
+    xl = x[~small]
+    s, c = np.sin(xl), np.cos(xl)
+    psi[~small] = (xl * xl * s - 3 * s + 3 * xl * c) / xl**5
+    dd[~small] = (xl**3 * c - 5 * xl * xl * s - 12 * xl * c + 12 * s) / xl**5
+    return psi, dd
+
+
+def ball_moment_spectra(shape: tuple[int, int, int], h: float, r: float) -> list[np.ndarray]:
+    """Spectra of the first and second moment kernels of the ball, on an rfftn half-spectrum.
+
+    Convolved with an occupancy grid they give, at p, ``m_i = ∫ (x - p)_i`` and
+    ``M_ij = ∫ (x - p)_i (x - p)_j`` over ball(p, r) ∩ solid. With F(k) the ball's
+    transform: first moments ``-i F'(k) w_i / k``; second moments
+    ``-(F'' w_i w_j / k^2 + F'/k (delta_ij - w_i w_j / k^2))``.
+
+    Returns
+    -------
+    [m_x, m_y, m_z, M_xx, M_yy, M_zz, M_xy, M_xz, M_yz] (complex64 for m, float32 for M)
+    """
+    def radial(k, r):
+        psi, dd = _ball_derivatives(k * r)
+        return (np.float32(4.0 * np.pi * r**5) * psi.astype(np.float32),
+                np.float32(4.0 * np.pi * r**5) * dd.astype(np.float32))
+
+    f1_over_k, f2 = radial_on_grid(radial, shape, h, r)  # F'(k)/k and F''(k), float32
+    w = [np.float32(2.0 * np.pi) * np.fft.fftfreq(n, d=h).astype(np.float32) for n in shape[:2]]
+    w.append(np.float32(2.0 * np.pi) * np.fft.rfftfreq(shape[2], d=h).astype(np.float32))
+    wx, wy, wz = w[0][:, None, None], w[1][None, :, None], w[2][None, None, :]
+    k2 = wx * wx + wy * wy + wz * wz
+    k2[0, 0, 0] = 1.0  # the direction at k = 0 is undefined; its products are zeroed below
+    inv_k2 = np.float32(1.0) / k2
+    out = [(-1j * (f1_over_k * wi)).astype(np.complex64) for wi in (wx, wy, wz)]
+    diff = f2 - f1_over_k  # spec = -(f1/k delta_ij + (F'' - F'/k) w_i w_j / k^2)
+    for wi, wj, same in ((wx, wx, True), (wy, wy, True), (wz, wz, True), (wx, wy, False), (wx, wz, False), (wy, wz, False)):
+        spec = diff * (wi * wj * inv_k2)
+        if same:
+            spec += f1_over_k
+        spec *= np.float32(-1.0)
+        spec[0, 0, 0] = 4.0 * np.pi * r**5 / 15.0 if same else 0.0
+        out.append(spec)
+    return out

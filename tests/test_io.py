@@ -66,3 +66,23 @@ def test_transforms_are_validated(tmp_path):
         read_transforms(p)
     write_json(p, {"fragments": {"a": {"transform": np.eye(4).tolist(), "placed": False}}})
     assert read_transforms(p)["a"]["placed"] is False
+
+
+def test_non_manifold_and_degenerate_faces(tmp_path):
+    import trimesh
+
+    # two cubes sharing one edge: every edge closed, but the shared one has four faces
+    a = trimesh.creation.box()
+    b = trimesh.creation.box()
+    b.apply_translation([1.0, 1.0, 0.0])
+    both = trimesh.util.concatenate([a, b])
+    both.merge_vertices()
+    both.export(tmp_path / "bowtie.ply")
+    with pytest.raises(ReassembleError, match="non-manifold"):
+        load_mesh(tmp_path / "bowtie.ply")
+    # a collapsed face (repeated vertex) and a duplicate face are dropped, the solid stays closed
+    box = trimesh.creation.box()
+    faces = np.vstack([box.faces, [[0, 0, 1]], box.faces[:1]])
+    trimesh.Trimesh(box.vertices, faces, process=False).export(tmp_path / "dirty.ply")
+    mesh = load_mesh(tmp_path / "dirty.ply")
+    assert len(mesh.faces) == len(box.faces)

@@ -115,6 +115,14 @@ def test_describe_writes_the_documented_arrays(tmp_path):
             assert z[key].shape == (n, 2) and np.isfinite(z[key]).all()
     rc, _, err = run("describe", "torus", "--radii", "0.05", "--relative", "--out", out)
     assert_one_line_error(rc, err, "exists", "--force")
+    rc, _, err = run("describe", "torus", "--radii", "0.05", "--relative", "--out", out, "--force",
+                     "--principal", "--no-d2")
+    assert rc == 0, err
+    with np.load(out) as z:
+        n = len(z["vertices"])
+        assert z["normal"].shape == (n, 1, 3) and z["dir1"].shape == (n, 1, 3)
+        assert np.allclose(np.linalg.norm(z["normal"], axis=-1), 1.0)
+        assert (z["k1"] >= z["k2"]).all() and np.isnan(z["D2"]).all()
 
 
 def test_describe_bad_input(tmp_path):

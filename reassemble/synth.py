@@ -134,7 +134,7 @@ def fractal_heightfield(n: int, *, hurst: float, rng: np.random.Generator) -> np
     f[0, 0] = np.inf
     amplitude = f ** (-(hurst + 1.0))
     amplitude[f < 1.0 / n] = 0.0  # nothing longer than the piece: its bend comes from the band edge
-    amplitude *= np.exp(-((f / 0.2) ** 2))  # roll off near the grid step: no single-cell spikes
+    amplitude *= np.exp(-((f / 0.35) ** 2))  # roll off near the grid step: no single-cell spikes
     phase = rng.random(amplitude.shape)
     spectrum = amplitude * rng.standard_normal(amplitude.shape) * np.exp(2j * np.pi * phase)
     h = np.fft.irfft2(spectrum, s=(m, m))[:n, :n]
@@ -203,6 +203,18 @@ def _centroid_and_axis(solid) -> tuple[np.ndarray, np.ndarray, float]:
     return centroid, evecs[:, -1], float(np.sqrt(max(evals[-1], 0.0)))
 
 
+def _thickness(solid) -> float:
+    """Smallest RMS extent of the surface (area-weighted covariance of the face centroids)."""
+    v, f, _ = _mesh_arrays(solid)
+    tri = v[f]
+    w = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    c = tri.mean(axis=1)
+    mean = (c * w[:, None]).sum(axis=0) / w.sum()
+    d = c - mean
+    cov = (d * w[:, None]).T @ d / w.sum()
+    return float(np.sqrt(max(np.linalg.eigvalsh(cov)[0], 0.0)))
+
+
 def _random_unit(rng: np.random.Generator) -> np.ndarray:
     v = rng.standard_normal(3)
     return v / np.linalg.norm(v)
@@ -216,9 +228,14 @@ def _frame_from_normal(normal: np.ndarray, rng: np.random.Generator) -> np.ndarr
     return np.column_stack([x, y, normal])
 
 
-def _split_piece(piece, *, params: BreakParams, diag: float, min_vol: float, room: int, rng):
-    """Try rough cuts of ``piece`` until one gives 2..room+1 chunky parts; None if none does."""
+def _split_piece(piece, *, params: BreakParams, diag: float, min_vol: float, min_thick: float, room: int, rng):
+    """Try rough cuts of ``piece`` until one gives 2..room+1 chunky parts; None if none does.
+
+    Chunky: each part at least ``min_vol`` in volume and ``min_thick`` times the piece's
+    thickness (its smallest extent), so no thin slabs are shaved off its side.
+    """
     centroid, axis, extent = _centroid_and_axis(piece)
+    thick = _thickness(piece)
     v, _, _ = _mesh_arrays(piece)
     for _attempt in range(40):
         # mostly across the longest extent, tilted at random: chunky pieces, varied faces
@@ -235,6 +252,8 @@ def _split_piece(piece, *, params: BreakParams, diag: float, min_vol: float, roo
             continue
         if min(p.volume() for p in parts) < min_vol:
             continue
+        if min(_thickness(p) for p in parts) < min_thick * thick:
+            continue
         return parts, cutter.original_id()
     return None
 
@@ -250,9 +269,10 @@ def _fracture(solid, *, params: BreakParams, diag: float, rng) -> tuple[list, se
         result = None
         for relax in range(4):
             min_vol = min_fraction * 0.5**relax * total / params.pieces
+            min_thick = 0.35 * 0.5**relax
             for i in order[:3]:  # the largest pieces first
                 result = _split_piece(
-                    pieces[i], params=params, diag=diag, min_vol=min_vol,
+                    pieces[i], params=params, diag=diag, min_vol=min_vol, min_thick=min_thick,
                     room=params.pieces - len(pieces), rng=rng,
                 )
                 if result is not None:

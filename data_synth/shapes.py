@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from reassemble.geometry import signed_volume
+
 
 def torus_mesh(
     R: float = 1.0,
@@ -131,12 +133,6 @@ def box_mesh(size=4.0) -> tuple[np.ndarray, np.ndarray]:
     extents = np.broadcast_to(np.asarray(size, dtype=np.float64), (3,))
     m = trimesh.creation.box(extents=extents)
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
-
-
-def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Volume enclosed by a closed mesh; positive when it is outward-oriented."""
-    t = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
-    return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
 
 
 def is_closed_manifold(faces: np.ndarray) -> bool:

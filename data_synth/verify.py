@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from reassemble.geometry import face_areas, transform_points
+from reassemble.geometry import face_areas, signed_volume, transform_points
 from reassemble.pipeline import PuzzleFiles
 
 
@@ -68,11 +68,6 @@ class _Surface:
         return d
 
 
-def _signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    t = vertices[faces]
-    return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
-
-
 def check_puzzle(puzzle: PuzzleFiles, original_vertices: np.ndarray, original_faces: np.ndarray) -> dict:
     """Measure a puzzle against the mesh it was broken from (scaled as the puzzle says).
 
@@ -98,8 +93,8 @@ def check_puzzle(puzzle: PuzzleFiles, original_vertices: np.ndarray, original_fa
     for name, mesh in puzzle.meshes.items():
         T = np.asarray(gt["fragments"][name]["transform"])
         world[name] = (transform_points(T, mesh.vertices), mesh.faces, puzzle.labels[name])
-    total_volume = sum(_signed_volume(v, f) for v, f, _ in world.values())
-    original_volume = _signed_volume(ov, np.asarray(original_faces))
+    total_volume = sum(signed_volume(v, f) for v, f, _ in world.values())
+    original_volume = signed_volume(ov, np.asarray(original_faces))
     scenes = {n: _Surface(v, f, exact_below=tol) for n, (v, f, _) in world.items()}
 
     max_gap = 0.0

@@ -86,6 +86,18 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
 
 
+def tet_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Signed volume of the tetrahedron (origin, triangle) of each face: (m,); their sum is the
+    mesh's volume, positive for an outward-oriented closed mesh."""
+    t = np.asarray(vertices, dtype=np.float64)[faces]
+    return np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])) / 6.0
+
+
+def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Volume enclosed by a closed triangle mesh (negative when its faces point inwards)."""
+    return float(tet_volumes(vertices, faces).sum())
+
+
 def sample_surface(
     vertices: np.ndarray, faces: np.ndarray, count: int, *, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ReassembleError
-from .geometry import face_areas, invert_transform, make_transform, random_rotation, transform_points
+from .geometry import (
+    face_areas,
+    invert_transform,
+    make_transform,
+    random_rotation,
+    tet_volumes,
+    transform_points,
+)
 
 log = logging.getLogger(__name__)
 
@@ -196,7 +203,7 @@ def _centroid_and_axis(solid) -> tuple[np.ndarray, np.ndarray, float]:
     """Volume centroid, principal (longest) axis and RMS extent along it."""
     v, f, _ = _mesh_arrays(solid)
     tri = v[f]
-    vol = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
+    vol = tet_volumes(v, f)
     centroid = (tri.sum(axis=1) / 4.0 * vol[:, None]).sum(axis=0) / vol.sum()
     d = v - centroid
     evals, evecs = np.linalg.eigh(d.T @ d / len(d))

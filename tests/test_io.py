@@ -4,15 +4,14 @@ import numpy as np
 import pytest
 
 from reassemble.errors import ReassembleError
+from reassemble.geometry import signed_volume
 from reassemble.io import bundled_meshes, load_mesh, read_transforms, staged_directory, write_json
 
 
 @pytest.mark.parametrize("name", sorted(bundled_meshes()))
 def test_bundled_meshes_are_closed_solids(name):
     mesh = load_mesh(bundled_meshes()[name])
-    t = mesh.vertices[mesh.faces]
-    volume = np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6
-    assert volume > 0
+    assert signed_volume(mesh.vertices, mesh.faces) > 0
 
 
 def test_obj_uv_seams_are_welded(tmp_path):
@@ -31,8 +30,7 @@ def test_inward_mesh_is_flipped(tmp_path):
     box = trimesh.creation.box()
     trimesh.Trimesh(box.vertices, box.faces[:, ::-1]).export(tmp_path / "inv.stl")
     mesh = load_mesh(tmp_path / "inv.stl")
-    t = mesh.vertices[mesh.faces]
-    assert np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() > 0
+    assert signed_volume(mesh.vertices, mesh.faces) > 0
 
 
 def test_failed_build_leaves_nothing(tmp_path):

@@ -7,7 +7,7 @@ import pytest
 
 from data_synth.verify import check_puzzle
 from reassemble.errors import ReassembleError
-from reassemble.geometry import face_areas, transform_points
+from reassemble.geometry import face_areas, signed_volume, transform_points
 from reassemble.io import load_mesh, resolve_mesh_path
 from reassemble.pipeline import break_to_folder, read_puzzle
 from reassemble.synth import BreakParams, break_mesh, fractal_heightfield
@@ -16,11 +16,7 @@ from .conftest import tree_digest
 
 
 def _volume(puzzle):
-    total = 0.0
-    for f in puzzle.fragments:
-        t = f.vertices[f.faces]
-        total += np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0
-    return total
+    return sum(signed_volume(f.vertices, f.faces) for f in puzzle.fragments)
 
 
 def _original(name):

@@ -133,7 +133,7 @@ def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: boo
                 what.append(f"{n_nonmanifold} non-manifold edges")
             raise ReassembleError(
                 f"{path}: mesh is not a closed manifold after welding ({', '.join(what)}); "
-                "a watertight solid is needed (fill its holes first)"
+                "a watertight solid is needed: fill its holes first (open scans are not supported yet)"
             )
         if not mesh.is_winding_consistent:
             raise ReassembleError(f"{path}: inconsistent face orientation (not an oriented solid)")

@@ -46,14 +46,7 @@ def describe_to_file(
     if out.exists() and not force:
         raise ReassembleError(f"{out}: file exists (use --force to replace it)")
     path = resolve_mesh_path(mesh)
-    try:
-        data = load_mesh(path, require_closed=True)
-    except ReassembleError as exc:
-        if "not a closed manifold" in str(exc):
-            raise ReassembleError(
-                f"{exc}. Open scans are not supported yet: inside/outside is undefined"
-            ) from None
-        raise
+    data = load_mesh(path, require_closed=True)
     radii = np.asarray(radii, dtype=np.float64)
     diag = float(np.linalg.norm(np.ptp(data.vertices, axis=0)))
     if relative:

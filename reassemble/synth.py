@@ -49,6 +49,7 @@ class BreakParams:
     chip_size : typical chip radius, fraction of the object diagonal
     decimate : simplification tolerance, fraction of the object diagonal (0 = off)
     min_volume : smallest allowed fragment, as a fraction of the mean fragment volume
+    min_thickness : thinnest allowed part of a cut, as a fraction of the piece's thickness
     scale : factor applied to the input mesh first (to make puzzles in other units)
     """
 
@@ -61,6 +62,7 @@ class BreakParams:
     chip_size: float = 0.02
     decimate: float = 0.0
     min_volume: float = 0.3
+    min_thickness: float = 0.35
     scale: float = 1.0
 
     def check(self) -> None:
@@ -199,27 +201,23 @@ def _mesh_arrays(solid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return vertices, faces, origin
 
 
-def _centroid_and_axis(solid) -> tuple[np.ndarray, np.ndarray, float]:
-    """Volume centroid, principal (longest) axis and RMS extent along it."""
+def _shape(solid) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """Vertices, volume centroid, principal (longest) axis, RMS extent along it, thickness.
+
+    Thickness is the smallest RMS extent of the surface (area-weighted covariance of the
+    face centroids).
+    """
     v, f, _ = _mesh_arrays(solid)
     tri = v[f]
     vol = tet_volumes(v, f)
     centroid = (tri.sum(axis=1) / 4.0 * vol[:, None]).sum(axis=0) / vol.sum()
     d = v - centroid
     evals, evecs = np.linalg.eigh(d.T @ d / len(d))
-    return centroid, evecs[:, -1], float(np.sqrt(max(evals[-1], 0.0)))
-
-
-def _thickness(solid) -> float:
-    """Smallest RMS extent of the surface (area-weighted covariance of the face centroids)."""
-    v, f, _ = _mesh_arrays(solid)
-    tri = v[f]
-    w = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    w = face_areas(v, f)
     c = tri.mean(axis=1)
-    mean = (c * w[:, None]).sum(axis=0) / w.sum()
-    d = c - mean
-    cov = (d * w[:, None]).T @ d / w.sum()
-    return float(np.sqrt(max(np.linalg.eigvalsh(cov)[0], 0.0)))
+    dc = c - (c * w[:, None]).sum(axis=0) / w.sum()
+    thickness = np.sqrt(max(np.linalg.eigvalsh((dc * w[:, None]).T @ dc / w.sum())[0], 0.0))
+    return v, centroid, evecs[:, -1], float(np.sqrt(max(evals[-1], 0.0))), float(thickness)
 
 
 def _random_unit(rng: np.random.Generator) -> np.ndarray:
@@ -241,9 +239,7 @@ def _split_piece(piece, *, params: BreakParams, diag: float, min_vol: float, min
     Chunky: each part at least ``min_vol`` in volume and ``min_thick`` times the piece's
     thickness (its smallest extent), so no thin slabs are shaved off its side.
     """
-    centroid, axis, extent = _centroid_and_axis(piece)
-    thick = _thickness(piece)
-    v, _, _ = _mesh_arrays(piece)
+    v, centroid, axis, extent, thick = _shape(piece)
     for _attempt in range(40):
         # mostly across the longest extent, tilted at random: chunky pieces, varied faces
         normal = axis + 0.6 * _random_unit(rng)
@@ -259,7 +255,7 @@ def _split_piece(piece, *, params: BreakParams, diag: float, min_vol: float, min
             continue
         if min(p.volume() for p in parts) < min_vol:
             continue
-        if min(_thickness(p) for p in parts) < min_thick * thick:
+        if min(_shape(p)[4] for p in parts) < min_thick * thick:
             continue
         return parts, cutter.original_id()
     return None
@@ -276,7 +272,7 @@ def _fracture(solid, *, params: BreakParams, diag: float, rng) -> tuple[list, se
         result = None
         for relax in range(4):
             min_vol = min_fraction * 0.5**relax * total / params.pieces
-            min_thick = 0.35 * 0.5**relax
+            min_thick = params.min_thickness * 0.5**relax
             for i in order[:3]:  # the largest pieces first
                 result = _split_piece(
                     pieces[i], params=params, diag=diag, min_vol=min_vol, min_thick=min_thick,

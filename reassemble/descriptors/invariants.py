@@ -250,10 +250,11 @@ def integral_invariants(
             kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, radii[i]))
         values = _convolve_at(spectrum, kernels, grid, points)
         if params.principal:
-            for i in idx:
+            for j, i in enumerate(idx):
                 mom = _convolve_at(spectrum, ball_moment_spectra(grid.shape, grid.h, radii[i]), grid, points)
-                j = int(np.flatnonzero(idx == i)[0])
-                K2c[:, i], dir1[:, i], normal[:, i] = principal_from_moments(values[:, 2 * j], mom[:, :3], mom[:, 3:], radii[i])
+                K2c[:, i], dir1[:, i], normal[:, i] = principal_from_moments(
+                    values[:, 2 * j], mom[:, :3], mom[:, 3:], radii[i]
+                )
         # The ramp averages the solid over offsets of variance s2: V gains s2/2 * V'' and
         # P s2/2 * P'', with V'' = pi r^2 H and P'' = pi r^4 H / 2 to leading order.
         s2 = (params.antialias * h) ** 2 / 12.0

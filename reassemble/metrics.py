@@ -81,7 +81,7 @@ def _score(
 ) -> tuple[dict, list[dict]]:
     """All metrics for one set of predicted poses. Points and poses in object units."""
     per_fragment = []
-    world_gt, world_pred = [], []
+    world_gt, world_pred, dts = [], [], []
     for k, p in enumerate(points):
         gt = transform_points(T_gt[k], p)
         pred = transform_points(T_pred[k], p)
@@ -92,6 +92,7 @@ def _score(
         mean_dist = float(0.5 * (np.sqrt(d1).mean() + np.sqrt(d2).mean()))
         c = p.mean(axis=0)
         dt = (T_pred[k][:3, :3] @ c + T_pred[k][:3, 3] - T_gt[k][:3, :3] @ c - T_gt[k][:3, 3]) * scale
+        dts.append(dt)
         per_fragment.append(
             {
                 "placed": bool(placed[k]),
@@ -100,14 +101,13 @@ def _score(
                 "chamfer_sq_normalized": bb_loss,
                 "chamfer_mean_over_diag": mean_dist / diag,
                 "translation_error_normalized": float(np.linalg.norm(dt)),
-                "_dt": dt,
             }
         )
     R_gt, R_pred = T_gt[:, :3, :3], T_pred[:, :3, :3]
     diff = np.abs(euler_zyx_deg(R_pred) - euler_zyx_deg(R_gt))
     diff = np.minimum(diff, 360.0 - diff)
     geo = rotation_angle_deg(R_gt, R_pred)
-    dt = np.array([f.pop("_dt") for f in per_fragment])
+    dt = np.array(dts)
     for f, g in zip(per_fragment, geo):
         f["rotation_error_deg"] = float(g)
     d1, d2 = chamfer_sq(np.vstack(world_pred), np.vstack(world_gt))

@@ -5,16 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from reassemble.geometry import face_areas, signed_volume, transform_points
+from reassemble.geometry import face_areas, make_scene, signed_volume, transform_points
 from reassemble.pipeline import PuzzleFiles
-
-
-def _scene(vertices: np.ndarray, faces: np.ndarray):
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(vertices.astype(np.float32), faces.astype(np.uint32))
-    return scene
 
 
 def _point_triangle_distance(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
@@ -47,7 +39,7 @@ class _Surface:
         from scipy.spatial import cKDTree
 
         self.tri = vertices[faces]
-        self.scene = _scene(vertices, faces)
+        self.scene = make_scene(vertices, faces)
         self.exact_below = exact_below
         centers = self.tri.mean(axis=1)
         self.reach = float(np.linalg.norm(self.tri - centers[:, None], axis=2).max())

@@ -98,6 +98,17 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     return float(tet_volumes(vertices, faces).sum())
 
 
+def make_scene(vertices: np.ndarray, faces: np.ndarray):
+    """An Open3D ray-casting scene (BVH) of a triangle mesh, for rays and distance queries."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        np.ascontiguousarray(vertices, dtype=np.float32), np.ascontiguousarray(faces, dtype=np.uint32)
+    )
+    return scene
+
+
 def sample_surface(
     vertices: np.ndarray, faces: np.ndarray, count: int, *, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -22,6 +22,7 @@ from .errors import ReassembleError
 from .geometry import (
     face_areas,
     invert_transform,
+    make_scene,
     make_transform,
     random_rotation,
     tet_volumes,
@@ -329,9 +330,7 @@ def _contacts(world: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], tol: 
 
     scenes, boxes = [], []
     for _, v, f, _ in world:
-        scene = o3d.t.geometry.RaycastingScene()
-        scene.add_triangles(v.astype(np.float32), f.astype(np.uint32))
-        scenes.append(scene)
+        scenes.append(make_scene(v, f))
         boxes.append((v.min(axis=0) - tol, v.max(axis=0) + tol))
     contacts = []
     for i in range(len(world)):

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ReassembleError
-from ..geometry import face_areas, sample_surface
+from ..geometry import face_areas, make_scene, sample_surface
 from .kernels import (
     ball_moment_spectra,
     ball_spectra,
@@ -37,7 +37,7 @@ from .kernels import (
     radial_on_grid,
     spline_integration,
 )
-from .voxelize import Grid, make_grid, make_scene, occupancy, saturated_square, squared_distance
+from .voxelize import Grid, make_grid, occupancy, saturated_square, squared_distance
 
 log = logging.getLogger(__name__)
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+
 # Grid origins are shifted by this fraction of a voxel so that axis-aligned faces of CAD
 # meshes, whose coordinates are often round numbers, never lie on a ray.
 _ORIGIN_JITTER = 0.1234567
@@ -50,17 +51,6 @@ def make_grid(bbox_min: np.ndarray, bbox_max: np.ndarray, *, h: float, margin: f
     centre = lo + extent / 2
     origin = centre - h * (np.array(shape) - 1) / 2 + _ORIGIN_JITTER * h
     return Grid(origin=origin, h=float(h), shape=shape)
-
-
-def make_scene(vertices: np.ndarray, faces: np.ndarray):
-    """An Open3D ray-casting scene (BVH) of a triangle mesh."""
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        np.ascontiguousarray(vertices, dtype=np.float32), np.ascontiguousarray(faces, dtype=np.uint32)
-    )
-    return scene
 
 
 def inside_centres(scene, grid: Grid) -> np.ndarray:

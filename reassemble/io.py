@@ -20,6 +20,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from .errors import ReassembleError
+from .geometry import is_rigid
 
 log = logging.getLogger(__name__)
 
@@ -252,8 +253,6 @@ def read_transforms(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
             T = np.asarray(entry["transform"], dtype=np.float64)
         except (TypeError, ValueError):
             raise ReassembleError(f"{path}: fragment {name!r}: transform is not numeric") from None
-        from .geometry import is_rigid
-
         if not is_rigid(T, atol=1e-4):
             raise ReassembleError(
                 f"{path}: fragment {name!r}: transform is not a 4x4 rigid motion (row-major)"

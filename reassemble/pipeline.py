@@ -183,3 +183,104 @@ def evaluate_files(
     report["predicted"] = str(predicted)
     report["ground_truth"] = str(ground_truth)
     return report
+
+
+@dataclasses.dataclass(frozen=True)
+class MatchConfig:
+    """Options of the matching stages; lengths are fractions of the reference size (the
+    median fragment bounding-box diagonal), resolved from the data.
+
+    Parameters
+    ----------
+    radii : descriptor radii
+    keypoint_spacing : spacing of fracture keypoints
+    samples : fracture and surface samples per fragment (ICP, contact, penetration)
+    """
+
+    radii: tuple[float, ...] = (0.02, 0.04, 0.08)
+    keypoint_spacing: float = 0.015
+    samples: int = 4000
+
+
+@dataclasses.dataclass
+class PreparedFragment:
+    """One fragment after descriptors, segmentation and features."""
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    descriptors: object
+    segmentation: object
+    surface: object
+
+
+def reference_size(meshes: list[tuple[np.ndarray, np.ndarray]]) -> float:
+    """The median bounding-box diagonal of the fragments: the unit of every default length."""
+    return float(np.median([np.linalg.norm(np.ptp(v, axis=0)) for v, _ in meshes]))
+
+
+def prepare_fragments(
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]],
+    *,
+    config: MatchConfig = MatchConfig(),
+    segment_params=None,
+    seed: int = 0,
+    progress: bool = False,
+) -> tuple[list[PreparedFragment], float]:
+    """Descriptors at the face centres, segmentation over the whole set, fracture features.
+
+    Returns the prepared fragments (in sorted name order) and the reference size.
+    """
+    from tqdm import tqdm
+
+    from .descriptors import DescriptorParams, integral_invariants
+    from .features import fracture_surface
+    from .segmentation import SegmentParams, segment
+
+    names = sorted(meshes)
+    pairs = [meshes[n] for n in names]
+    size = reference_size(pairs)
+    radii = size * np.asarray(config.radii)
+    params = DescriptorParams(with_d2=False, principal=True)
+    descriptors = [
+        integral_invariants(v, f, radii, points=v[f].mean(axis=1), params=params)
+        for v, f in tqdm(pairs, desc="descriptors", disable=not progress)
+    ]
+    segs = segment(pairs, descriptors, size=size, params=segment_params or SegmentParams(), seed=seed)
+    rngs = np.random.default_rng(seed).spawn(len(names))
+    out = []
+    for name, (v, f), d, s, rng in zip(names, pairs, descriptors, segs, rngs):
+        surf = fracture_surface(v, f, s, d, spacing=config.keypoint_spacing * size, n_samples=config.samples, rng=rng)
+        if surf.fracture_area == 0.0:
+            log.warning("%s: no fracture surface found; it can only be placed by others", name)
+        out.append(PreparedFragment(name, v, f, d, s, surf))
+    return out, size
+
+
+def match_pairs(
+    fragments: list[PreparedFragment],
+    *,
+    size: float,
+    pairs: list[tuple[int, int]] | None = None,
+    params=None,
+    seed: int = 0,
+    progress: bool = False,
+) -> dict[tuple[int, int], object]:
+    """Register fragment pairs (all, or the given (source, target) index pairs): PairResult per pair."""
+    from tqdm import tqdm
+
+    from .geometry import make_scene
+    from .registration import RegistrationParams, register_pair
+
+    params = params or RegistrationParams()
+    if pairs is None:
+        pairs = [(i, j) for i in range(len(fragments)) for j in range(i + 1, len(fragments))]
+    scenes = [make_scene(f.vertices, f.faces) for f in fragments]
+    rngs = np.random.default_rng(seed).spawn(len(pairs))
+    results = {}
+    for (i, j), rng in zip(tqdm(pairs, desc="pairs", disable=not progress), rngs):
+        results[(i, j)] = register_pair(
+            fragments[i].surface, fragments[j].surface, source_scene=scenes[i], target_scene=scenes[j],
+            size=size, params=params, rng=rng,
+        )
+    return results

@@ -44,8 +44,8 @@ class SegmentParams:
 
     crease_angle: float = 30.0
     patch_size: float = 0.1
-    smoothness: float = 3.0
-    smooth_angle: float = 15.0
+    smoothness: float = 1.0
+    smooth_angle: float = 10.0
     samples: int = 30000
     min_samples: int = 12
 
@@ -231,7 +231,18 @@ def segment(
     out = []
     for f, score in zip(frags, scores):
         prob = gmm.predict_proba(score[:, None])[:, rough]
-        label = _graph_cut(f, prob, params)
+        # the boundary term must tidy the evidence, not overrule it: where the cut moves more
+        # than half the fracture area of the mixture (a fracture met at a shallow angle all
+        # round), halve its weight (measured: spot 4 pieces, one fragment erased at weight 1)
+        evidence = float(f.patch_area[prob > 0.5].sum())
+        weight = params.smoothness
+        for _ in range(4):
+            label = _graph_cut(f, prob, params, weight=weight)
+            if abs(float(f.patch_area[label].sum()) - evidence) <= 0.5 * evidence:
+                break
+            weight *= 0.5
+        else:
+            label = prob > 0.5
         fracture = label[f.patch]
         region = np.full(len(fracture), -1)
         idx = np.flatnonzero(fracture)
@@ -246,7 +257,7 @@ def segment(
     return out
 
 
-def _graph_cut(f: _Fragment, prob: np.ndarray, params: SegmentParams) -> np.ndarray:
+def _graph_cut(f: _Fragment, prob: np.ndarray, params: SegmentParams, *, weight: float) -> np.ndarray:
     """(patches,) bool: the minimum cut of patch evidence plus smooth-boundary length."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import breadth_first_order, maximum_flow
@@ -258,7 +269,7 @@ def _graph_cut(f: _Fragment, prob: np.ndarray, params: SegmentParams) -> np.ndar
     smooth = f.edge_length[cross] * np.exp(-((f.dihedral[cross] / params.smooth_angle) ** 2))
     # evidence is an area, the boundary a length: scale the boundary by the typical patch size
     total = f.patch_area.sum()
-    boundary = params.smoothness * smooth * np.sqrt(total)
+    boundary = weight * smooth * np.sqrt(total)
     cost_fracture = -np.log(prob) * f.patch_area
     cost_original = -np.log(1 - prob) * f.patch_area
     unit = 1e6 / total  # maximum_flow needs integer capacities

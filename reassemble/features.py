@@ -1,0 +1,118 @@
+"""Multi-scale signatures on fracture surfaces, and what a mating surface's signature looks like.
+
+A signature is scale-free: each radius contributes ``H_rob · r`` (mean curvature from V_r
+and P_r) and ``|κ1 − κ2| · r`` (from the covariance of ball ∩ solid, or from D2_r). Two
+mating fracture surfaces are complementary: the solid of one is the empty space of the
+other, so H changes sign while |κ1 − κ2| is unchanged; :func:`mate_signature` gives the
+signature a mating point should have.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import face_areas, sample_surface
+from .segmentation import Segmentation, face_normals
+
+
+@dataclass
+class FractureSurface:
+    """What registration needs of one fragment.
+
+    Attributes
+    ----------
+    keypoints : (k, 3) points on the fracture surface, about ``spacing`` apart
+    keypoint_normals : (k, 3) outward unit normals there (of ball ∩ solid: smooth)
+    signature : (k, s) scale-free multi-scale signature
+    samples : (q, 3) area-uniform samples of the fracture surface
+    sample_normals : (q, 3) face normals at the samples
+    sample_area : float, fracture area each sample stands for
+    surface : (p, 3) area-uniform samples of the whole surface (for penetration)
+    surface_area : float, whole-surface area each of those stands for
+    fracture_area, area : float
+    """
+
+    keypoints: np.ndarray
+    keypoint_normals: np.ndarray
+    signature: np.ndarray
+    samples: np.ndarray
+    sample_normals: np.ndarray
+    sample_area: float
+    surface: np.ndarray
+    surface_area: float
+    fracture_area: float
+    area: float
+
+
+def signature(descriptors) -> np.ndarray:
+    """(n, 2m) signature from Descriptors with ``principal``: H_rob r, then |κ1 − κ2| r."""
+    r = descriptors.radii[None, :]
+    return np.hstack([descriptors.H_rob * r, np.sqrt(np.maximum(descriptors.K2_cov, 0.0)) * r])
+
+
+def mate_signature(sig: np.ndarray) -> np.ndarray:
+    """The signature a point mating with ``sig`` should have: H flips sign, |κ1 − κ2| does not."""
+    out = np.array(sig, dtype=float, copy=True)
+    out[:, : sig.shape[1] // 2] *= -1.0
+    return out
+
+
+def _grid_subsample(points: np.ndarray, spacing: float) -> np.ndarray:
+    """Indices of one point per cubic cell of edge ``spacing`` (the one nearest the cell centre)."""
+    cell = np.floor(points / spacing)
+    offset = np.linalg.norm(points / spacing - cell - 0.5, axis=1)
+    keys = np.unique(cell, axis=0, return_inverse=True)[1].ravel()
+    order = np.lexsort((offset, keys))
+    first = np.r_[True, keys[order][1:] != keys[order][:-1]]
+    return np.sort(order[first])
+
+
+def fracture_surface(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    segmentation: Segmentation,
+    descriptors,
+    *,
+    spacing: float,
+    n_samples: int = 4000,
+    rng: np.random.Generator,
+) -> FractureSurface:
+    """Keypoints, signatures and samples of one fragment's fracture surface.
+
+    Parameters
+    ----------
+    vertices, faces : the fragment
+    segmentation : its Segmentation
+    descriptors : Descriptors at the face centres, with ``principal``
+    spacing : keypoint spacing (mesh units)
+    n_samples : samples of the fracture surface, and of the whole surface
+    rng : numpy Generator for the sampling
+    """
+    fracture = np.flatnonzero(segmentation.fracture)
+    area = face_areas(vertices, faces)
+    total = float(area.sum())
+    surface, _ = sample_surface(vertices, faces, n_samples, rng=rng)
+    if len(fracture) == 0:
+        empty = np.zeros((0, 3))
+        return FractureSurface(empty, empty, np.zeros((0, 2 * len(descriptors.radii))), empty, empty,
+                               0.0, surface, total / n_samples, 0.0, total)
+    centres = vertices[faces[fracture]].mean(axis=1)
+    keep = fracture[_grid_subsample(centres, spacing)]
+    normals = descriptors.normal[keep, 0]
+    sub = faces[fracture]
+    samples, which = sample_surface(vertices, sub, n_samples, rng=rng)
+    frac_area = float(area[fracture].sum())
+    return FractureSurface(
+        keypoints=vertices[faces[keep]].mean(axis=1),
+        keypoint_normals=normals,
+        signature=signature(descriptors)[keep],
+        samples=samples,
+        sample_normals=face_normals(vertices, sub)[which],
+        sample_area=frac_area / n_samples,
+        surface=surface,
+        surface_area=total / n_samples,
+        fracture_area=frac_area,
+        area=total,
+    )

@@ -123,6 +123,20 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_match(args: argparse.Namespace) -> int:
+    from .pipeline import match_to_folder
+
+    summary = match_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
+                              progress=not args.quiet)
+    print(f"{summary['fragments']} fragments, {summary['pairs']} pairs, {summary['touching']} touching:")
+    for p in summary["pair_list"]:
+        best = p["candidates"][0] if p["candidates"] else None
+        score = f"score {best['score']:.3f}, contact {best['contact_area']:.4g}" if best else "no candidate"
+        print(f"  {p['source']} - {p['target']}: {'touch' if p['touching'] else 'apart'} ({score})")
+    print(f"wrote {args.out}/pairs.json")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="reassemble",
@@ -200,7 +214,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--points", type=_int_at_least(10), default=1000, help="points sampled per fragment")
     p.add_argument("--seed", type=_int_at_least(0), default=0, help="seed of the point samples")
     p.set_defaults(func=_cmd_eval)
+    _add_match(sub)
     return parser
+
+
+def _add_match(sub) -> None:
+    p = sub.add_parser(
+        "match",
+        help="find fracture surfaces and register fragment pairs",
+        description="Segment every fragment into fracture and original surface and register every "
+        "pair along the fracture surfaces. Writes pairs.json (ranked candidate transforms "
+        "T_target_source with contact and penetration), fragments.json and config.json.",
+    )
+    p.add_argument("inputs", nargs="+", help="fragment mesh files, or folders of them")
+    p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
+    p.add_argument("--force", action="store_true", help="replace an existing output folder")
+    p.add_argument("--seed", type=_int_at_least(0), default=0, help="random seed (default 0)")
+    p.add_argument("--debug-files", action="store_true",
+                   help="also write fracture labels as vertex colours (labels/*.ply) and matched keypoints per pair")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_match)
 
 
 def main(argv: list[str] | None = None) -> int:

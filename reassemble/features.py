@@ -24,7 +24,7 @@ class FractureSurface:
     Attributes
     ----------
     keypoints : (k, 3) points on the fracture surface, about ``spacing`` apart
-    keypoint_normals : (k, 3) outward unit normals there (of ball ∩ solid: smooth)
+    keypoint_normals : (k, 3) outward unit normals there (of ball ∩ solid at the finest radius)
     signature : (k, s) scale-free multi-scale signature
     samples : (q, 3) area-uniform samples of the fracture surface
     sample_normals : (q, 3) face normals at the samples
@@ -59,14 +59,20 @@ def mate_signature(sig: np.ndarray) -> np.ndarray:
     return out
 
 
-def _grid_subsample(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Indices of one point per cubic cell of edge ``spacing`` (the one nearest the cell centre)."""
-    cell = np.floor(points / spacing)
-    offset = np.linalg.norm(points / spacing - cell - 0.5, axis=1)
-    keys = np.unique(cell, axis=0, return_inverse=True)[1].ravel()
-    order = np.lexsort((offset, keys))
-    first = np.r_[True, keys[order][1:] != keys[order][:-1]]
-    return np.sort(order[first])
+def _grid_subsample(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """One point per cubic cell of edge ``spacing`` (the one nearest the cell centre).
+
+    Returns
+    -------
+    chosen : (k,) indices of the chosen points, one per cell, in cell order
+    cell : (n,) the cell (0..k-1) of every point
+    """
+    grid = np.floor(points / spacing)
+    offset = np.linalg.norm(points / spacing - grid - 0.5, axis=1)
+    cell = np.unique(grid, axis=0, return_inverse=True)[1].ravel()
+    order = np.lexsort((offset, cell))
+    first = np.r_[True, cell[order][1:] != cell[order][:-1]]
+    return order[first], cell
 
 
 def fracture_surface(
@@ -99,8 +105,9 @@ def fracture_surface(
         return FractureSurface(empty, empty, np.zeros((0, 2 * len(descriptors.radii))), empty, empty,
                                0.0, surface, total / n_samples, 0.0, total)
     centres = vertices[faces[fracture]].mean(axis=1)
-    keep = fracture[_grid_subsample(centres, spacing)]
-    normals = descriptors.normal[keep, 0]
+    chosen, cell = _grid_subsample(centres, spacing)
+    keep = fracture[chosen]
+    normals = descriptors.normal[keep, 0]  # of ball ∩ solid: smooth; measured better than cell-mean face normals
     sub = faces[fracture]
     samples, which = sample_surface(vertices, sub, n_samples, rng=rng)
     frac_area = float(area[fracture].sum())

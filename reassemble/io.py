@@ -200,17 +200,27 @@ def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
     _atomic_write(Path(path), buf.getvalue())
 
 
-def write_ply(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray) -> None:
-    """Write a binary little-endian PLY (float64 positions, int32 indices) atomically."""
-    vertices = np.ascontiguousarray(vertices, dtype="<f8")
+def write_ply(
+    path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, *, colors: np.ndarray | None = None
+) -> None:
+    """Write a binary little-endian PLY (float64 positions, int32 indices) atomically.
+
+    ``colors``: optional (n, 3) uint8 vertex colours.
+    """
+    vertices = np.asarray(vertices, dtype="<f8")
     faces = np.asarray(faces)
+    color_props = "property uchar red\nproperty uchar green\nproperty uchar blue\n" if colors is not None else ""
     header = (
         "ply\nformat binary_little_endian 1.0\n"
         f"element vertex {len(vertices)}\n"
-        "property double x\nproperty double y\nproperty double z\n"
+        "property double x\nproperty double y\nproperty double z\n" + color_props +
         f"element face {len(faces)}\n"
         "property list uchar int vertex_indices\nend_header\n"
     ).encode()
+    if colors is not None:
+        rec = np.empty(len(vertices), dtype=[("p", "<f8", (3,)), ("c", "u1", (3,))])
+        rec["p"], rec["c"] = vertices, colors
+        vertices = rec
     face_rec = np.empty(len(faces), dtype=[("n", "u1"), ("i", "<i4", (3,))])
     face_rec["n"] = 3
     face_rec["i"] = faces

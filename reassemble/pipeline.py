@@ -284,3 +284,124 @@ def match_pairs(
             size=size, params=params, rng=rng,
         )
     return results
+
+
+FRACTURE_RGB = np.array([214, 69, 50], np.uint8)
+ORIGINAL_RGB = np.array([190, 190, 190], np.uint8)
+
+
+def load_fragments(inputs: list[str | Path]) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:
+    """Read fragment meshes from files and folders; a bad file is skipped with a warning.
+
+    Returns the meshes by file stem and the warnings (one line each). Identical fragments
+    (same welded vertices and faces) are kept but warned about.
+    """
+    from .io import MESH_SUFFIXES
+
+    files: list[Path] = []
+    for item in inputs:
+        path = Path(item)
+        if path.is_dir():
+            found = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+            if not found:
+                raise ReassembleError(f"{path}: no mesh files ({' '.join(MESH_SUFFIXES)}) in this folder")
+            files += found
+        elif path.is_file():
+            files.append(path)
+        else:
+            raise ReassembleError(f"{path}: no such file or folder")
+    meshes, warnings, digests = {}, [], {}
+    for path in files:
+        try:
+            m = load_mesh(path, require_closed=True)
+        except ReassembleError as exc:
+            warnings.append(f"skipped: {exc}")
+            continue
+        name = path.stem
+        if name in meshes:
+            warnings.append(f"skipped: {path}: a fragment named {name!r} was already read")
+            continue
+        digest = hashlib.sha256(np.ascontiguousarray(m.vertices).tobytes() + m.faces.tobytes()).hexdigest()
+        if digest in digests:
+            warnings.append(f"{path}: identical to fragment {digests[digest]!r}")
+        digests.setdefault(digest, name)
+        meshes[name] = (m.vertices, m.faces)
+    for w in warnings:
+        log.warning("%s", w)
+    if len(meshes) < 2:
+        raise ReassembleError(f"need at least two readable fragments, got {len(meshes)} "
+                              f"({len(files)} mesh file(s) given)")
+    return meshes, warnings
+
+
+def match_to_folder(
+    inputs: list[str | Path], out: str | Path, *, seed: int = 0, force: bool = False, debug: bool = False,
+    config: MatchConfig = MatchConfig(), progress: bool = False,
+) -> dict:
+    """Segment the fragments, register every pair, and write ``pairs.json`` (+ debug files).
+
+    Writes into ``out`` (built aside, moved into place when complete): ``pairs.json`` with
+    each pair's ranked candidates (``T_target_source``, score, contact and penetration
+    areas) and verdict, ``fragments.json`` (fracture area, regions, warnings per fragment),
+    ``config.json`` (the resolved configuration); with ``debug``, ``labels/NAME.ply``
+    (fracture faces' vertices red) and ``matches/SOURCE__TARGET.npz`` (matched keypoints of
+    the best candidate, each in its own fragment's frame).
+    """
+    from .registration import RegistrationParams
+    from .segmentation import SegmentParams
+
+    if Path(out).exists() and not force:  # before minutes of work, not after
+        raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
+    meshes, warnings = load_fragments(inputs)
+    seg_params, reg_params = SegmentParams(), RegistrationParams()
+    frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, progress=progress)
+    results = match_pairs(frags, size=size, params=reg_params, seed=seed, progress=progress)
+    frag_report = {}
+    for f in frags:
+        notes = []
+        if f.surface.fracture_area == 0.0:
+            notes.append("no fracture surface found")
+        frag_report[f.name] = {
+            "faces": len(f.faces), "area": f.surface.area, "fracture_area": f.surface.fracture_area,
+            "fracture_share": f.surface.fracture_area / f.surface.area,
+            "fracture_regions": int(f.segmentation.region.max()) + 1, "keypoints": len(f.surface.keypoints),
+            "notes": notes,
+        }
+    pairs = []
+    for (i, j), res in sorted(results.items()):
+        pairs.append({
+            "source": frags[i].name, "target": frags[j].name, "touching": res.touching,
+            "candidates": [
+                {"T_target_source": c.T_target_source.tolist(), "score": c.score, "contact_area": c.contact_area,
+                 "penetration_area": c.penetration_area, "inliers": c.inliers}
+                for c in res.candidates
+            ],
+        })
+    resolved = {
+        "seed": seed, "reference_size": size,
+        "match": dataclasses.asdict(config), "segmentation": dataclasses.asdict(seg_params),
+        "registration": dataclasses.asdict(reg_params),
+        "note": "lengths in match/segmentation/registration are fractions of reference_size "
+                "(the median fragment bounding-box diagonal)",
+    }
+    with staged_directory(out, force=force) as tmp:
+        write_json(tmp / "pairs.json", {"format": "reassemble-pairs/1", "convention": "T_target_source",
+                                        "version": __version__, "pairs": pairs})
+        write_json(tmp / "fragments.json", {"fragments": frag_report, "warnings": warnings})
+        write_json(tmp / "config.json", resolved)
+        if debug:
+            (tmp / "labels").mkdir()
+            (tmp / "matches").mkdir()
+            for f in frags:
+                colors = np.tile(ORIGINAL_RGB, (len(f.vertices), 1))
+                colors[np.unique(f.faces[f.segmentation.fracture])] = FRACTURE_RGB
+                write_ply(tmp / "labels" / f"{f.name}.ply", f.vertices, f.faces, colors=colors)
+            for (i, j), res in results.items():
+                if res.best is None:
+                    continue
+                write_npz(tmp / "matches" / f"{frags[i].name}__{frags[j].name}.npz",
+                          source_points=frags[i].surface.keypoints[res.matches[:, 0]],
+                          target_points=frags[j].surface.keypoints[res.matches[:, 1]],
+                          T_target_source=res.best.T_target_source)
+    return {"fragments": len(frags), "pairs": len(pairs), "touching": sum(p["touching"] for p in pairs),
+            "warnings": warnings, "pair_list": pairs}

@@ -2,11 +2,13 @@
 
 1. correspondences: each source keypoint's mate signature (H flipped) against the target's
    signatures (k-d tree), both ways;
-2. RANSAC over 3-point hypotheses, pruned before any fit by rigidity (the three pairwise
-   distances agree) and by the angles between the normals; fitted by Kabsch, then kept
-   only if the normals face each other; scored by keypoint inliers (near and opposed);
-3. the best distinct hypotheses refined by point-to-plane ICP (Open3D) between the two
-   fracture surfaces;
+2. RANSAC over hypotheses from two correspondences with their normals (a point-pair:
+   two points and two opposed normals fix a rigid motion, so a hypothesis needs two good
+   correspondences, not three), pruned before any fit by the point-pair features
+   (distance, angle between the normals, angles of the normals to the chord); fitted by
+   Kabsch; scored by keypoint inliers (near and with opposed normals);
+3. the best distinct hypotheses refined by point-to-plane ICP between the two fracture
+   surfaces, on pairs with opposed normals only;
 4. every candidate scored by contact (source fracture area within a tolerance of the
    target, normals opposed) minus interpenetration (surface area of either fragment that
    lies inside the other, from Open3D signed distances), over the smaller fragment's area.
@@ -33,7 +35,8 @@ class RegistrationParams:
     tolerance : contact tolerance after ICP
     ransac_tolerance : inlier distance and rigidity tolerance of the RANSAC hypotheses
     neighbours : signature neighbours per keypoint
-    hypotheses : 3-point samples drawn
+    pair_radius : largest distance between the two keypoints of a hypothesis, on each side
+    hypotheses : at most this many pairs of correspondences are tested (a random subset)
     max_scored : hypotheses passing the checks that are scored
     candidates : distinct hypotheses refined by ICP and returned
     normal_angle : degrees: agreement of normal angles within a triple, and the largest
@@ -45,8 +48,9 @@ class RegistrationParams:
     tolerance: float = 0.006
     ransac_tolerance: float = 0.02
     neighbours: int = 3
-    hypotheses: int = 40000
-    max_scored: int = 4000
+    pair_radius: float = 0.1
+    hypotheses: int = 200000
+    max_scored: int = 6000
     candidates: int = 6
     normal_angle: float = 30.0
     penetration_weight: float = 2.0
@@ -119,34 +123,57 @@ def ransac(
     pairs: np.ndarray,
     *,
     tol: float,
+    radius: float,
     params: RegistrationParams,
     rng: np.random.Generator,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Hypotheses from 3-point samples of ``pairs``: (h, 4, 4) transforms and (h,) inlier counts, best first."""
+    """Hypotheses from pairs of correspondences: (h, 4, 4) transforms and (h,) inlier counts, best first.
+
+    The pairs of correspondences are enumerated, not drawn: all whose source keypoints and
+    whose target keypoints both lie within ``radius`` of each other (a k-d tree on the
+    6-d concatenation, Chebyshev metric). A small contact holds only a handful of true
+    correspondences among thousands; random draws of two would almost never hit two of them.
+    """
     from scipy.spatial import cKDTree
 
-    if len(pairs) < 3:
+    if len(pairs) < 2:
         return np.zeros((0, 4, 4)), np.zeros(0, int)
-    pick = rng.integers(len(pairs), size=(params.hypotheses, 3))
+    joint = np.hstack([source.keypoints[pairs[:, 0]], target.keypoints[pairs[:, 1]]])
+    pick = cKDTree(joint).query_pairs(radius, p=np.inf, output_type="ndarray")
+    if len(pick) > params.hypotheses:
+        pick = pick[np.sort(rng.choice(len(pick), params.hypotheses, replace=False))]
+    if len(pick) == 0:
+        return np.zeros((0, 4, 4)), np.zeros(0, int)
     a = source.keypoints[pairs[pick, 0]]
     b = target.keypoints[pairs[pick, 1]]
     na = source.keypoint_normals[pairs[pick, 0]]
-    nb = target.keypoint_normals[pairs[pick, 1]]
-    cos_tol = np.cos(np.radians(params.normal_angle))
-    ok = np.ones(len(pick), bool)
-    for i, j in ((0, 1), (1, 2), (0, 2)):
-        da = np.linalg.norm(a[:, i] - a[:, j], axis=1)
-        db = np.linalg.norm(b[:, i] - b[:, j], axis=1)
-        ok &= (np.abs(da - db) < tol) & (da > 3 * tol)
-        ang_a = np.einsum("hi,hi->h", na[:, i], na[:, j])
-        ang_b = np.einsum("hi,hi->h", nb[:, i], nb[:, j])
-        ok &= np.abs(np.arccos(np.clip(ang_a, -1, 1)) - np.arccos(np.clip(ang_b, -1, 1))) < np.radians(params.normal_angle)
-    idx = np.flatnonzero(ok)[: params.max_scored]
+    nb = -target.keypoint_normals[pairs[pick, 1]]  # mating normals are opposed
+    # point-pair features must agree: distance, the normals' angle, each normal's angle to the chord
+    da = np.linalg.norm(a[:, 1] - a[:, 0], axis=1)
+    db = np.linalg.norm(b[:, 1] - b[:, 0], axis=1)
+    ok = (np.abs(da - db) < tol) & (da > 3 * tol)
+    ua = (a[:, 1] - a[:, 0]) / np.maximum(da, 1e-300)[:, None]
+    ub = (b[:, 1] - b[:, 0]) / np.maximum(db, 1e-300)[:, None]
+    angle = np.radians(params.normal_angle)
+
+    def ang(x, y):
+        return np.arccos(np.clip(np.einsum("hi,hi->h", x, y), -1.0, 1.0))
+
+    ok &= np.abs(ang(na[:, 0], na[:, 1]) - ang(nb[:, 0], nb[:, 1])) < angle
+    ok &= np.abs(ang(na[:, 0], ua) - ang(nb[:, 0], ub)) < angle
+    ok &= np.abs(ang(na[:, 1], ua) - ang(nb[:, 1], ub)) < angle
+    idx = np.flatnonzero(ok)
+    if len(idx) > params.max_scored:
+        idx = np.sort(rng.choice(idx, params.max_scored, replace=False))
     if len(idx) == 0:
         return np.zeros((0, 4, 4)), np.zeros(0, int)
-    T = kabsch(a[idx], b[idx])
+    # two points and their normals (as points one chord length out) fix the rigid motion
+    lever = da[idx, None, None]
+    T = kabsch(np.concatenate([a[idx], a[idx] + lever * na[idx]], axis=1),
+               np.concatenate([b[idx], b[idx] + lever * nb[idx]], axis=1))
+    cos_tol = np.cos(angle)
     rotated = np.einsum("hij,hkj->hki", T[:, :3, :3], na[idx])
-    facing = np.all(np.einsum("hki,hki->hk", rotated, nb[idx]) < -cos_tol, axis=1)
+    facing = np.all(np.einsum("hki,hki->hk", rotated, nb[idx]) > cos_tol, axis=1)
     T = T[facing]
     if len(T) == 0:
         return T, np.zeros(0, int)
@@ -176,20 +203,51 @@ def _distinct(T: np.ndarray, count: int, *, tol: float) -> list[int]:
     return chosen
 
 
-def icp(source: FractureSurface, target: FractureSurface, T: np.ndarray, *, tol: float) -> np.ndarray:
-    """Point-to-plane ICP of the source fracture samples onto the target's, from ``T``, coarse to fine."""
-    import open3d as o3d
+def icp(
+    source: FractureSurface, target: FractureSurface, T: np.ndarray, *, tol: float, normal_angle: float = 30.0,
+    iterations: int = 10,
+) -> np.ndarray:
+    """Point-to-plane ICP of the source fracture samples onto the target's, from ``T``.
 
-    reg = o3d.pipelines.registration
-    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source.samples))
-    dst = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target.samples))
-    dst.normals = o3d.utility.Vector3dVector(target.sample_normals)
-    for distance in (4 * tol, 2 * tol, tol):
-        T = reg.registration_icp(
-            src, dst, distance, T, reg.TransformationEstimationPointToPlane(),
-            reg.ICPConvergenceCriteria(max_iteration=30),
-        ).transformation
-    return np.asarray(T)
+    Only pairs with opposed normals count (Open3D's ICP has no such test: on a small contact
+    it slid onto the neighbouring fracture faces of the other fragment, measured). Coarse
+    to fine: distance thresholds 3, 2 and 1 times ``tol``.
+    """
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(target.samples)
+    cos_tol = np.cos(np.radians(normal_angle))
+    T = np.array(T, dtype=float, copy=True)
+    for distance in (3 * tol, 2 * tol, tol):
+        for _ in range(iterations):
+            p = transform_points(T, source.samples)
+            n_src = source.sample_normals @ T[:3, :3].T
+            d, j = tree.query(p, distance_upper_bound=distance)
+            ok = np.isfinite(d)
+            ok[ok] = np.einsum("ij,ij->i", n_src[ok], target.sample_normals[j[ok]]) < -cos_tol
+            if np.count_nonzero(ok) < 6:
+                return T
+            p, q, n = p[ok], target.samples[j[ok]], target.sample_normals[j[ok]]
+            A = np.hstack([np.cross(p, n), n])
+            b = -np.einsum("ij,ij->i", p - q, n)
+            x = np.linalg.lstsq(A, b, rcond=None)[0]
+            step = np.eye(4)
+            step[:3, :3] = _rotation(x[:3])
+            step[:3, 3] = x[3:]
+            T = step @ T
+            if np.linalg.norm(x[:3]) < 1e-7 and np.linalg.norm(x[3:]) < 1e-6 * tol:
+                break
+    return T
+
+
+def _rotation(w: np.ndarray) -> np.ndarray:
+    """Rotation matrix of the rotation vector ``w`` (Rodrigues)."""
+    angle = float(np.linalg.norm(w))
+    if angle < 1e-15:
+        return np.eye(3)
+    k = w / angle
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
 def contact_score(
@@ -252,10 +310,10 @@ def register_pair(
     if len(source.keypoints) < 3 or len(target.keypoints) < 3:
         return PairResult([], False, np.zeros((0, 2), int))
     pairs = correspondences(source, target, neighbours=params.neighbours)
-    T, inliers = ransac(source, target, pairs, tol=rtol, params=params, rng=rng)
+    T, inliers = ransac(source, target, pairs, tol=rtol, radius=params.pair_radius * size, params=params, rng=rng)
     candidates = []
     for i in _distinct(T, params.candidates, tol=rtol):
-        refined = icp(source, target, T[i], tol=tol)
+        refined = icp(source, target, T[i], tol=tol, normal_angle=params.normal_angle)
         score, contact, pen = contact_score(source, target, refined, source_scene=source_scene,
                                             target_scene=target_scene, tol=tol, params=params)
         candidates.append(Candidate(refined, score, contact, pen, int(inliers[i])))

@@ -134,3 +134,45 @@ def test_describe_bad_input(tmp_path):
     rc, _, err = run("describe", "torus", "--radii", "1e-4", "--out", tmp_path / "o.npz", "--max-memory", "1G")
     assert_one_line_error(rc, err, "--max-memory")
     assert not (tmp_path / "o.npz").exists()
+
+
+def test_match_writes_pairs_and_debug_files(puzzle_dir, tmp_path):
+    frag_dir = puzzle_dir / "fragments"
+    before = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in frag_dir.iterdir()}
+    # a stray non-mesh and an unreadable mesh among good ones: skipped with a warning
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    for p in sorted(frag_dir.glob("*.ply"))[:2]:
+        (mixed / p.name).write_bytes(p.read_bytes())
+    (mixed / "notes.txt").write_text("not a mesh")
+    (mixed / "broken.ply").write_bytes(b"\x00garbage")
+    rc, out, err = run("match", mixed, "--out", tmp_path / "m", "--debug-files", "--quiet")
+    assert rc == 0, err
+    assert "broken.ply" in err and "Traceback" not in err
+    pairs = json.loads((tmp_path / "m" / "pairs.json").read_text())
+    assert pairs["convention"] == "T_target_source" and len(pairs["pairs"]) == 1
+    cands = pairs["pairs"][0]["candidates"]
+    assert cands and all(a["score"] >= b["score"] for a, b in zip(cands, cands[1:]))
+    labels = trimesh.load(tmp_path / "m" / "labels" / "fragment_00.ply", process=False)
+    colors = np.asarray(labels.visual.vertex_colors)[:, :3]
+    assert {tuple(c) for c in np.unique(colors, axis=0)} <= {(214, 69, 50), (190, 190, 190)}
+    assert len(np.unique(colors, axis=0)) == 2
+    assert (tmp_path / "m" / "config.json").is_file()
+    rc, _, err = run("match", mixed, "--out", tmp_path / "m", "--quiet")
+    assert_one_line_error(rc, err, "exists", "--force")
+    assert before == {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in frag_dir.iterdir()}
+
+
+def test_match_bad_input(tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    rc, _, err = run("match", empty, "--out", tmp_path / "o")
+    assert_one_line_error(rc, err, "no mesh files")
+    rc, _, err = run("match", tmp_path / "missing", "--out", tmp_path / "o")
+    assert_one_line_error(rc, err, "no such file")
+    one = tmp_path / "one"
+    one.mkdir()
+    trimesh.creation.box().export(one / "a.ply")
+    rc, _, err = run("match", one, "--out", tmp_path / "o")
+    assert_one_line_error(rc, err, "at least two")
+    assert not (tmp_path / "o").exists()

@@ -1,0 +1,170 @@
+"""Segmentation and pairwise registration on the bench set, beside Open3D's textbook pipeline.
+
+    python benchmarks/pairwise.py puzzles/bench                       # 2, 4, 8 pieces, seed 0, clean + noisy
+    python benchmarks/pairwise.py puzzles/bench --pieces 2,4,8,12,20 --seeds 0,1,2 --jobs 2
+
+The bench set is built first if missing (python -m data_synth.make_sets bench --out DIR).
+Per puzzle:
+- segmentation: area-weighted F1 of the fracture label against the generator's labels;
+- every fragment pair registered (ours: signatures + point-pair RANSAC + ICP, scored by
+  contact minus penetration); a pair touching in the truth with a contact area of at least
+  5 % of the smaller fragment's surface is "correct" when the top candidate is within 2° and
+  1 % of the object's bounding-box diagonal (translation error at the source's centroid);
+- the best score of touching pairs (>= 5 %) against pairs that do not touch: ROC AUC;
+- the same pairs with Open3D's FPFH + RANSAC + ICP (tutorial settings, voxel 1/40 of the
+  reference size; its ICP fitness as the score), unless --no-baseline;
+- time: preparation (descriptors, segmentation, features) per fragment, and per pair.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import header  # noqa: E402
+
+MIN_CONTACT = 0.05
+
+
+def errors(T: np.ndarray, T_true: np.ndarray, centre: np.ndarray, diag: float) -> tuple[float, float]:
+    from reassemble.geometry import rotation_angle_deg
+
+    rot = float(rotation_angle_deg(T[:3, :3], T_true[:3, :3]))
+    t = float(np.linalg.norm(T[:3, :3] @ centre + T[:3, 3] - T_true[:3, :3] @ centre - T_true[:3, 3])) / diag
+    return rot, t
+
+
+def run_puzzle(gt_path: str, baseline: bool, seed: int) -> dict:
+    from sklearn.metrics import f1_score
+
+    from reassemble.geometry import face_areas, invert_transform
+    from reassemble.pipeline import match_pairs, prepare_fragments, read_puzzle
+
+    puzzle = read_puzzle(gt_path)
+    gt = puzzle.ground_truth
+    t = time.perf_counter()
+    frags, size = prepare_fragments({n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}, seed=seed)
+    t_prepare = time.perf_counter() - t
+    labels = np.concatenate([puzzle.labels[f.name] for f in frags])
+    pred = np.concatenate([f.segmentation.fracture for f in frags])
+    area = np.concatenate([face_areas(f.vertices, f.faces) for f in frags])
+    f1 = float(f1_score(labels, pred, sample_weight=area))
+    t = time.perf_counter()
+    results = match_pairs(frags, size=size, seed=seed)
+    t_pairs = time.perf_counter() - t
+    diag = float(gt["object"]["diagonal"])
+    T_world = {n: np.asarray(v["transform"]) for n, v in gt["fragments"].items()}
+    contact = {tuple(sorted(c["fragments"])): float(c["area"]) for c in gt["contacts"]}
+    rows = []
+    t_base = 0.0
+    for (i, j), res in results.items():
+        a, b = frags[i], frags[j]
+        share = contact.get(tuple(sorted((a.name, b.name))), 0.0) / min(a.surface.area, b.surface.area)
+        T_true = invert_transform(T_world[b.name]) @ T_world[a.name]
+        centre = a.vertices.mean(axis=0)
+        row = {"share": share, "score": -np.inf, "ok": False, "base_score": 0.0, "base_ok": False}
+        if res.best is not None:
+            rot, tr = errors(res.best.T_target_source, T_true, centre, diag)
+            row.update(score=res.best.score, ok=rot < 2.0 and tr < 0.01, rot=rot, t=tr)
+        if baseline:
+            from reassemble.baseline import fpfh_register
+
+            tb = time.perf_counter()
+            T_b, fitness = fpfh_register(a.vertices, a.faces, b.vertices, b.faces, voxel=size / 40, seed=seed)
+            t_base += time.perf_counter() - tb
+            rot, tr = errors(T_b, T_true, centre, diag)
+            row.update(base_score=fitness, base_ok=rot < 2.0 and tr < 0.01)
+        rows.append(row)
+    return {"name": Path(gt_path).parent.name, "fragments": len(frags), "f1": f1, "rows": rows,
+            "t_prepare": t_prepare, "t_pairs": t_pairs, "t_base": t_base,
+            "faces": int(np.mean([len(f.faces) for f in frags]))}
+
+
+def auc(pos: list[float], neg: list[float]) -> float:
+    from sklearn.metrics import roc_auc_score
+
+    if not pos or not neg:
+        return float("nan")
+    y = np.r_[np.ones(len(pos)), np.zeros(len(neg))]
+    s = np.nan_to_num(np.r_[pos, neg], neginf=-1e9)
+    return float(roc_auc_score(y, s))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("root", type=Path, help="bench set folder (built if missing)")
+    parser.add_argument("--pieces", default="2,4,8")
+    parser.add_argument("--seeds", default="0")
+    parser.add_argument("--meshes", default=None, help="comma-separated subset of the bench meshes")
+    parser.add_argument("--clean-only", action="store_true")
+    parser.add_argument("--no-baseline", action="store_true")
+    parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    header()
+    from data_synth.make_sets import build_set
+    from data_synth.sets import bench_set
+
+    if not (args.root / "index.json").is_file():
+        print(f"building the bench set in {args.root} ...", flush=True)
+        build_set("bench", args.root, jobs=max(1, args.jobs))
+    pieces = {int(p) for p in args.pieces.split(",")}
+    seeds = {int(s) for s in args.seeds.split(",")}
+    meshes = set(args.meshes.split(",")) if args.meshes else None
+    specs = [s for s in bench_set() if s.pieces in pieces and s.seed in seeds
+             and (meshes is None or s.mesh in meshes) and not (args.clean_only and s.noise)]
+    paths = [str(args.root / s.name / "ground_truth.json") for s in specs]
+    print(f"{len(specs)} puzzles; pairs touching with contact >= {MIN_CONTACT:.0%} of the smaller fragment's "
+          "surface must be within 2° and 1 % of the diagonal")
+    print(f"{'puzzle':<36s} {'frags':>5s} {'F1':>6s} {'touch':>5s} {'ours':>5s} {'fpfh':>5s} "
+          f"{'AUC':>6s} {'fpfhAUC':>7s} {'prep/frag s':>11s} {'s/pair':>7s} {'fpfh s/pair':>11s}")
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(args.jobs) as pool:
+        results = list(pool.map(run_puzzle, paths, [not args.no_baseline] * len(paths), [args.seed] * len(paths)))
+    groups: dict[str, list] = {"all": [], "clean": [], "noisy": []}
+    for spec, r in zip(specs, results):
+        rows = r["rows"]
+        touch = [x for x in rows if x["share"] >= MIN_CONTACT]
+        apart = [x for x in rows if x["share"] == 0.0]
+        n_pairs = max(1, len(rows))
+        print(f"{r['name']:<36s} {r['fragments']:>5d} {r['f1']:>6.3f} {len(touch):>5d} "
+              f"{sum(x['ok'] for x in touch):>5d} {sum(x['base_ok'] for x in touch):>5d} "
+              f"{auc([x['score'] for x in touch], [x['score'] for x in apart]):>6.3f} "
+              f"{auc([x['base_score'] for x in touch], [x['base_score'] for x in apart]):>7.3f} "
+              f"{r['t_prepare'] / r['fragments']:>11.2f} {r['t_pairs'] / n_pairs:>7.2f} {r['t_base'] / n_pairs:>11.2f}",
+              flush=True)
+        for g in ("all", "noisy" if spec.noise else "clean"):
+            groups[g].append(r)
+    print(f"\ntotal {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")
+    for g, rs in groups.items():
+        if not rs:
+            continue
+        rows = [x for r in rs for x in r["rows"]]
+        touch = [x for x in rows if x["share"] >= MIN_CONTACT]
+        apart = [x for x in rows if x["share"] == 0.0]
+        area_f1 = np.mean([r["f1"] for r in rs])
+        print(f"{g:>5s}: {len(rs)} puzzles; segmentation F1 mean {area_f1:.3f} (min {min(r['f1'] for r in rs):.3f}); "
+              f"touching pairs correct: ours {np.mean([x['ok'] for x in touch]):.3f}, "
+              f"fpfh {np.mean([x['base_ok'] for x in touch]):.3f} of {len(touch)}; "
+              f"AUC ours {auc([x['score'] for x in touch], [x['score'] for x in apart]):.3f}, "
+              f"fpfh {auc([x['base_score'] for x in touch], [x['base_score'] for x in apart]):.3f}")
+    by_n: dict[int, list] = {}
+    for r in results:
+        by_n.setdefault(r["fragments"], []).append(r)
+    print("\nall-pairs time against fragment count (ours; mean over puzzles):")
+    for n in sorted(by_n):
+        rs = by_n[n]
+        print(f"  {n:>3d} fragments ({n * (n - 1) // 2:>4d} pairs, ~{np.mean([r['faces'] for r in rs]):.0f} faces each): "
+              f"prepare {np.mean([r['t_prepare'] for r in rs]):6.1f} s, pairs {np.mean([r['t_pairs'] for r in rs]):6.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -75,6 +75,17 @@ def _grid_subsample(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.
     return order[first], cell
 
 
+def empty_surface(
+    vertices: np.ndarray, faces: np.ndarray, *, n_radii: int, n_samples: int, rng: np.random.Generator
+) -> FractureSurface:
+    """The FractureSurface of a fragment with no fracture found: nothing to match, surface kept for collisions."""
+    total = float(face_areas(vertices, faces).sum())
+    surface, _ = sample_surface(vertices, faces, n_samples, rng=rng)
+    empty = np.zeros((0, 3))
+    return FractureSurface(empty, empty, np.zeros((0, 2 * n_radii)), empty, empty, 0.0, surface,
+                           total / n_samples, 0.0, total)
+
+
 def fracture_surface(
     vertices: np.ndarray,
     faces: np.ndarray,
@@ -97,13 +108,11 @@ def fracture_surface(
     rng : numpy Generator for the sampling
     """
     fracture = np.flatnonzero(segmentation.fracture)
+    if len(fracture) == 0:
+        return empty_surface(vertices, faces, n_radii=len(descriptors.radii), n_samples=n_samples, rng=rng)
     area = face_areas(vertices, faces)
     total = float(area.sum())
     surface, _ = sample_surface(vertices, faces, n_samples, rng=rng)
-    if len(fracture) == 0:
-        empty = np.zeros((0, 3))
-        return FractureSurface(empty, empty, np.zeros((0, 2 * len(descriptors.radii))), empty, empty,
-                               0.0, surface, total / n_samples, 0.0, total)
     centres = vertices[faces[fracture]].mean(axis=1)
     chosen, cell = _grid_subsample(centres, spacing)
     keep = fracture[chosen]

@@ -212,6 +212,7 @@ class PreparedFragment:
     descriptors: object
     segmentation: object
     surface: object
+    note: str = ""
 
 
 def reference_size(meshes: list[tuple[np.ndarray, np.ndarray]]) -> float:
@@ -234,26 +235,48 @@ def prepare_fragments(
     from tqdm import tqdm
 
     from .descriptors import DescriptorParams, integral_invariants
-    from .features import fracture_surface
-    from .segmentation import SegmentParams, segment
+    from .features import empty_surface, fracture_surface
+    from .segmentation import SegmentParams, Segmentation, segment
 
     names = sorted(meshes)
     pairs = [meshes[n] for n in names]
     size = reference_size(pairs)
     radii = size * np.asarray(config.radii)
     params = DescriptorParams(with_d2=False, principal=True)
-    descriptors = [
-        integral_invariants(v, f, radii, points=v[f].mean(axis=1), params=params)
-        for v, f in tqdm(pairs, desc="descriptors", disable=not progress)
-    ]
-    segs = segment(pairs, descriptors, size=size, params=segment_params or SegmentParams(), seed=seed)
+    descriptors, notes = [], {}
+    for name, (v, f) in zip(names, tqdm(pairs, desc="descriptors", disable=not progress)):
+        diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+        if diag <= radii.max():
+            notes[name] = (f"not matched: too small (bounding-box diagonal {diag:.4g}, below the largest "
+                           f"descriptor radius {radii.max():.4g} = {config.radii[-1]:g} x the median fragment)")
+            descriptors.append(None)
+            continue
+        try:
+            descriptors.append(integral_invariants(v, f, radii, points=v[f].mean(axis=1), params=params))
+        except ReassembleError as exc:  # e.g. a crumb smaller than the radii: the others go on
+            notes[name] = f"not matched: {exc}"
+            descriptors.append(None)
+    good = [k for k, d in enumerate(descriptors) if d is not None]
+    segs = [None] * len(names)
+    if good:
+        for k, s in zip(good, segment([pairs[k] for k in good], [descriptors[k] for k in good], size=size,
+                                      params=segment_params or SegmentParams(), seed=seed)):
+            segs[k] = s
     rngs = np.random.default_rng(seed).spawn(len(names))
     out = []
     for name, (v, f), d, s, rng in zip(names, pairs, descriptors, segs, rngs):
-        surf = fracture_surface(v, f, s, d, spacing=config.keypoint_spacing * size, n_samples=config.samples, rng=rng)
-        if surf.fracture_area == 0.0:
-            log.warning("%s: no fracture surface found; it can only be placed by others", name)
-        out.append(PreparedFragment(name, v, f, d, s, surf))
+        if s is None:
+            s = Segmentation(np.zeros(len(f), bool), np.zeros(len(f)), np.zeros(len(f), int),
+                             np.full(len(f), -1), 0.0, float(face_areas(v, f).sum()))
+            surf = empty_surface(v, f, n_radii=len(radii), n_samples=config.samples, rng=rng)
+            log.warning("%s: %s", name, notes[name])
+        else:
+            surf = fracture_surface(v, f, s, d, spacing=config.keypoint_spacing * size,
+                                    n_samples=config.samples, rng=rng)
+            if surf.fracture_area == 0.0:
+                notes[name] = "no fracture surface found; it can only be placed by others"
+                log.warning("%s: %s", name, notes[name])
+        out.append(PreparedFragment(name, v, f, d, s, surf, notes.get(name, "")))
     return out, size
 
 
@@ -358,9 +381,7 @@ def match_to_folder(
     results = match_pairs(frags, size=size, params=reg_params, seed=seed, progress=progress)
     frag_report = {}
     for f in frags:
-        notes = []
-        if f.surface.fracture_area == 0.0:
-            notes.append("no fracture surface found")
+        notes = [f.note] if f.note else []
         frag_report[f.name] = {
             "faces": len(f.faces), "area": f.surface.area, "fracture_area": f.surface.fracture_area,
             "fracture_share": f.surface.fracture_area / f.surface.area,

@@ -177,18 +177,28 @@ def ransac(
     T = T[facing]
     if len(T) == 0:
         return T, np.zeros(0, int)
-    # inliers among (a subsample of) the source keypoints
-    probe = rng.permutation(len(source.keypoints))[:300]
+    # inliers among a subsample of the source keypoints: a coarse pass over all hypotheses,
+    # then the best few hundred again with more probes (the k-d tree queries are the cost)
+    tree = cKDTree(target.keypoints)
+    order = rng.permutation(len(source.keypoints))
+    inliers = _inliers(T, source, target, tree, order[:80], tol=tol, cos_tol=cos_tol)
+    top = np.argsort(-inliers, kind="stable")[:300]
+    T = T[top]
+    inliers = _inliers(T, source, target, tree, order[:400], tol=tol, cos_tol=cos_tol)
+    best = np.argsort(-inliers, kind="stable")
+    return T[best], inliers[best]
+
+
+def _inliers(T, source, target, tree, probe, *, tol: float, cos_tol: float) -> np.ndarray:
+    """(h,) how many probe keypoints land within ``tol`` of a target keypoint with opposed normals."""
     p, n = source.keypoints[probe], source.keypoint_normals[probe]
     moved = np.einsum("hij,kj->hki", T[:, :3, :3], p) + T[:, None, :3, 3]
     turned = np.einsum("hij,kj->hki", T[:, :3, :3], n)
-    dist, near = cKDTree(target.keypoints).query(moved.reshape(-1, 3), distance_upper_bound=tol)
+    dist, near = tree.query(moved.reshape(-1, 3), distance_upper_bound=tol)
     hit = np.isfinite(dist)
     opposed = np.zeros_like(hit)
     opposed[hit] = np.einsum("ij,ij->i", turned.reshape(-1, 3)[hit], target.keypoint_normals[near[hit]]) < -cos_tol
-    inliers = opposed.reshape(len(T), -1).sum(axis=1)
-    order = np.argsort(-inliers, kind="stable")
-    return T[order], inliers[order]
+    return opposed.reshape(len(T), -1).sum(axis=1)
 
 
 def _distinct(T: np.ndarray, count: int, *, tol: float) -> list[int]:

@@ -89,3 +89,18 @@ def test_matching_deterministic(prepared):
     assert len(a.candidates) == len(b.candidates)
     for x, y in zip(a.candidates, b.candidates):
         assert np.array_equal(x.T_target_source, y.T_target_source) and x.score == y.score
+
+
+def test_crumb_and_intact_object_reported_not_fatal(puzzle):
+    import trimesh
+
+    meshes = {n: (m.vertices, m.faces) for n, m in list(puzzle.meshes.items())[:2]}
+    crumb = trimesh.creation.box(extents=[1e-3] * 3)
+    meshes["crumb"] = (np.asarray(crumb.vertices), np.asarray(crumb.faces))
+    frags, size = prepare_fragments(meshes, seed=0)
+    by_name = {f.name: f for f in frags}
+    assert "too small" in by_name["crumb"].note
+    assert by_name["crumb"].surface.fracture_area == 0.0
+    results = match_pairs(frags, size=size, seed=0)
+    i = [f.name for f in frags].index("crumb")
+    assert all(not r.touching and not r.candidates for (a, b), r in results.items() if i in (a, b))

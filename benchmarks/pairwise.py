@@ -87,6 +87,19 @@ def run_puzzle(gt_path: str, baseline: bool, seed: int) -> dict:
             "faces": int(np.mean([len(f.faces) for f in frags]))}
 
 
+def report_puzzle(r: dict) -> None:
+    rows = r["rows"]
+    touch = [x for x in rows if x["share"] >= MIN_CONTACT]
+    apart = [x for x in rows if x["share"] == 0.0]
+    n_pairs = max(1, len(rows))
+    print(f"{r['name']:<36s} {r['fragments']:>5d} {r['f1']:>6.3f} {len(touch):>5d} "
+          f"{sum(x['ok'] for x in touch):>5d} {sum(x['base_ok'] for x in touch):>5d} "
+          f"{auc([x['score'] for x in touch], [x['score'] for x in apart]):>6.3f} "
+          f"{auc([x['base_score'] for x in touch], [x['base_score'] for x in apart]):>7.3f} "
+          f"{r['t_prepare'] / r['fragments']:>11.2f} {r['t_pairs'] / n_pairs:>7.2f} {r['t_base'] / n_pairs:>11.2f}",
+          flush=True)
+
+
 def auc(pos: list[float], neg: list[float]) -> float:
     from sklearn.metrics import roc_auc_score
 
@@ -127,19 +140,13 @@ def main() -> int:
           f"{'AUC':>6s} {'fpfhAUC':>7s} {'prep/frag s':>11s} {'s/pair':>7s} {'fpfh s/pair':>11s}")
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.jobs) as pool:
-        results = list(pool.map(run_puzzle, paths, [not args.no_baseline] * len(paths), [args.seed] * len(paths)))
+        results = []
+        for spec, r in zip(specs, pool.map(run_puzzle, paths, [not args.no_baseline] * len(paths),
+                                           [args.seed] * len(paths))):
+            results.append(r)
+            report_puzzle(r)
     groups: dict[str, list] = {"all": [], "clean": [], "noisy": []}
     for spec, r in zip(specs, results):
-        rows = r["rows"]
-        touch = [x for x in rows if x["share"] >= MIN_CONTACT]
-        apart = [x for x in rows if x["share"] == 0.0]
-        n_pairs = max(1, len(rows))
-        print(f"{r['name']:<36s} {r['fragments']:>5d} {r['f1']:>6.3f} {len(touch):>5d} "
-              f"{sum(x['ok'] for x in touch):>5d} {sum(x['base_ok'] for x in touch):>5d} "
-              f"{auc([x['score'] for x in touch], [x['score'] for x in apart]):>6.3f} "
-              f"{auc([x['base_score'] for x in touch], [x['base_score'] for x in apart]):>7.3f} "
-              f"{r['t_prepare'] / r['fragments']:>11.2f} {r['t_pairs'] / n_pairs:>7.2f} {r['t_base'] / n_pairs:>11.2f}",
-              flush=True)
         for g in ("all", "noisy" if spec.noise else "clean"):
             groups[g].append(r)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")

@@ -240,16 +240,22 @@ def segment(
     pick = rng.choice(len(pooled), size=min(5000, 4 * int(informative.sum())), p=w / w.sum())
     state = int(rng.integers(2**31))
     fits = [GaussianMixture(k, random_state=state).fit(pooled[pick, None]) for k in (2, 3)]
-    # two or three components by BIC, the roughest is fracture: where the original surface
-    # is itself two kinds (thin curved parts and broad faces: wingnut, CAD), two components
-    # split those, not fracture from original (2 pieces: F1 0.58 -> 0.999 on wingnut)
+    # two or three components by BIC; the roughest is fracture, and the middle one too when
+    # nearer to it: where the original surface is itself two kinds (thin curved parts and
+    # broad faces: wingnut, CAD), two components split those, not fracture from original
+    # (2 pieces: F1 0.58 -> 0.999 on wingnut); where the fracture is two kinds, the middle
+    # one belongs to it
     gmm = min(fits, key=lambda g: g.bic(pooled[pick, None]))
-    rough = int(np.argmax(gmm.means_[:, 0]))
+    means = gmm.means_[:, 0]
+    order = np.argsort(means)
+    rough = [int(order[-1])]
+    if len(order) == 3 and means[order[2]] - means[order[1]] < means[order[1]] - means[order[0]]:
+        rough.append(int(order[1]))  # the middle component lies nearer the roughest: fracture too
 
     out = []
     for f, score, ex in zip(frags, scores, exact):
         prob = np.zeros(len(score))
-        prob[~ex] = gmm.predict_proba(score[~ex, None])[:, rough]
+        prob[~ex] = gmm.predict_proba(score[~ex, None])[:, rough].sum(axis=1)
         # the boundary term must tidy the evidence, not overrule it: where the cut moves more
         # than half the fracture area of the mixture (a fracture met at a shallow angle all
         # round), halve its weight (measured: spot 4 pieces, one fragment erased at weight 1)

@@ -204,13 +204,13 @@ def _neighbourhoods(points: np.ndarray, anchors: np.ndarray, radius: float) -> d
 
 def _draw(hoods: dict[int, np.ndarray], anchors: np.ndarray, m: int, rng: np.random.Generator) -> np.ndarray:
     """(h, m) point indices drawn uniformly (with replacement) from each anchor's neighbourhood."""
+    keys = np.fromiter(hoods, dtype=np.int64)
+    sizes = np.array([len(hoods[int(k)]) for k in keys])
+    flat = np.concatenate([hoods[int(k)] for k in keys])
+    start = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    row = np.searchsorted(keys, anchors)  # keys are sorted (np.unique)
     u = rng.random((len(anchors), m))
-    out = np.empty((len(anchors), m), dtype=np.int64)
-    for k in np.unique(anchors):
-        rows = anchors == k
-        hood = hoods[int(k)]
-        out[rows] = hood[(u[rows] * len(hood)).astype(np.int64)]
-    return out
+    return flat[start[row, None] + (u * sizes[row, None]).astype(np.int64)]
 
 
 def _inliers(T, source, target, tree, probes, *, tol: float, cos_tol: float) -> np.ndarray:

@@ -2,12 +2,14 @@
 
 1. correspondences: each source keypoint's mate signature (H flipped) against the target's
    signatures (k-d tree), both ways;
-2. RANSAC over hypotheses from two correspondences with their normals (a point-pair:
-   two points and two opposed normals fix a rigid motion, so a hypothesis needs two good
-   correspondences, not three), pruned before any fit by the point-pair features
-   (distance, angle between the normals, angles of the normals to the chord); fitted by
-   Kabsch; scored by keypoint inliers (near and with opposed normals);
-3. the best distinct hypotheses refined by point-to-plane ICP between the two fracture
+2. hypotheses from two correspondences with their normals (a point-pair: two points and
+   two opposed normals fix a rigid motion, so a hypothesis needs two good
+   correspondences, not three), enumerated among nearby pairs, pruned before any fit by
+   the point-pair features (distance, angle between the normals, angles of the normals
+   to the chord); fitted by Kabsch; scored by keypoint inliers (near, with opposed
+   normals) among probes drawn around the hypothesis;
+3. a shortlist of distinct hypotheses given a coarse ICP and a quick contact-minus-
+   penetration count; the best few refined by point-to-plane ICP between the two fracture
    surfaces, on pairs with opposed normals only;
 4. every candidate scored by contact (source fracture area within a tolerance of the
    target, normals opposed) minus interpenetration (surface area of either fragment that

@@ -12,7 +12,7 @@ import logging
 
 import numpy as np
 
-from .geometry import invert_transform, sample_surface
+from .geometry import face_normals, invert_transform, sample_surface
 
 log = logging.getLogger(__name__)
 
@@ -40,9 +40,7 @@ def _point_cloud(vertices: np.ndarray, faces: np.ndarray, count: int, rng: np.ra
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     points, face_index = sample_surface(vertices, faces, count, rng=rng)
-    tri = vertices[faces[face_index]]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    normals = face_normals(vertices, faces)[face_index]
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     pcd.normals = o3d.utility.Vector3dVector(normals)
     return pcd

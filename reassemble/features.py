@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import face_areas, sample_surface
-from .segmentation import Segmentation, face_normals
+from .geometry import face_areas, face_normals, sample_surface
+from .segmentation import Segmentation
 
 
 @dataclass

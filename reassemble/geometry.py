@@ -86,6 +86,14 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
 
 
+def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(m, 3) unit outward normals of the triangles (zero for collapsed ones)."""
+    tri = vertices[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
 def tet_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Signed volume of the tetrahedron (origin, triangle) of each face: (m,); their sum is the
     mesh's volume, positive for an outward-oriented closed mesh."""

@@ -253,7 +253,7 @@ def prepare_fragments(
             continue
         try:
             descriptors.append(integral_invariants(v, f, radii, points=v[f].mean(axis=1), params=params))
-        except ReassembleError as exc:  # e.g. a crumb smaller than the radii: the others go on
+        except ReassembleError as exc:  # e.g. a grid over the memory budget: the others go on
             notes[name] = f"not matched: {exc}"
             descriptors.append(None)
     good = [k for k, d in enumerate(descriptors) if d is not None]

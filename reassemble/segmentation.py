@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import face_areas, sample_surface
+from .geometry import face_areas, face_normals, sample_surface
 
 
 EXACT_QUADRIC = 1e-6  # relative RMS residual below which a patch is a quadric up to rounding
@@ -73,14 +73,6 @@ class Segmentation:
     region: np.ndarray
     fracture_area: float
     area: float
-
-
-def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(f, 3) unit outward normals (zero for collapsed faces)."""
-    tri = vertices[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
 def face_adjacency(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

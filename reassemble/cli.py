@@ -127,13 +127,52 @@ def _cmd_match(args: argparse.Namespace) -> int:
     from .pipeline import match_to_folder
 
     summary = match_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                              progress=not args.quiet)
+                              jobs=_jobs(args), progress=not args.quiet)
     print(f"{summary['fragments']} fragments, {summary['pairs']} pairs, {summary['touching']} touching:")
     for p in summary["pair_list"]:
         best = p["candidates"][0] if p["candidates"] else None
         score = f"score {best['score']:.3f}, contact {best['contact_area']:.4g}" if best else "no candidate"
         print(f"  {p['source']} - {p['target']}: {'touch' if p['touching'] else 'apart'} ({score})")
     print(f"wrote {args.out}/pairs.json")
+    return 0
+
+
+def _jobs(args) -> int:
+    import os
+
+    if args.jobs:
+        return args.jobs
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _print_run(report: dict, out: Path) -> None:
+    s = report["summary"]
+    print(f"{s['placed']} of {s['fragments']} fragments placed, {s['contacts']} contacts"
+          + (f", {s['sub_assemblies'] - 1} further sub-assemblies" if s["sub_assemblies"] > 1 else "")
+          + f" ({sum(s['timings_s'].values()):.0f} s)")
+    for name, f in report["fragments"].items():
+        state = "placed" if f["placed"] else f"NOT placed (group {f['group']})"
+        print(f"  {name}: {state}, confidence {f['confidence']:.2f}, touches {', '.join(f['neighbours']) or '-'}")
+    print(f"wrote {out}/transforms.json, assembled.glb, assembled.ply, report.json")
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .pipeline import run_to_folder
+
+    report = run_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
+                           jobs=_jobs(args), progress=not args.quiet)
+    _print_run(report, args.out)
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from .pipeline import demo_to_folder
+
+    report, score = demo_to_folder(args.out, mesh=args.mesh, pieces=args.pieces, seed=args.seed, force=args.force,
+                                   jobs=_jobs(args), progress=not args.quiet)
+    _print_run(report, args.out / "result")
+    print(f"against the ground truth ({args.out}/result/score.json):")
+    print(_format_report(score))
     return 0
 
 
@@ -215,7 +254,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_int_at_least(0), default=0, help="seed of the point samples")
     p.set_defaults(func=_cmd_eval)
     _add_match(sub)
+    _add_run(sub)
     return parser
+
+
+def _add_common(p) -> None:
+    p.add_argument("--force", action="store_true", help="replace an existing output folder")
+    p.add_argument("--seed", type=_int_at_least(0), default=0, help="random seed (default 0)")
+    p.add_argument("--jobs", type=_int_at_least(0), default=0,
+                   help="processes for the pairwise registration (default 0: one per available core)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _add_run(sub) -> None:
+    p = sub.add_parser(
+        "run",
+        help="assemble a folder of fragments into the object",
+        description="Find the fracture surfaces, register fragment pairs and assemble all fragments "
+        "into one consistent, collision-free object. Writes transforms.json (T_world_fragment, placed, "
+        "confidence per file stem), assembled.glb (one node per fragment), assembled.ply (placed "
+        "fragments), report.json, pairs.json and config.json. The folder appears only when complete.",
+    )
+    p.add_argument("inputs", nargs="+", help="fragment mesh files (.ply .obj .stl .off .glb .gltf), or folders of them")
+    p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
+    p.add_argument("--debug-files", action="store_true",
+                   help="also write fracture labels (labels/*.ply) and matched keypoints per pair (matches/)")
+    _add_common(p)
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser(
+        "demo",
+        help="break a bundled mesh, reassemble it and score the result",
+        description="The one-minute proof: breaks a bundled mesh into fragments in random poses "
+        "(OUT/puzzle), reassembles them with 'run' (OUT/result) and scores the result against the "
+        "ground truth (OUT/result/score.json).",
+    )
+    p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
+    p.add_argument("--mesh", default="spot", help="bundled mesh name or a closed mesh file (default spot)")
+    p.add_argument("--pieces", type=_int_at_least(2), default=8, help="number of fragments (default 8)")
+    _add_common(p)
+    p.set_defaults(func=_cmd_demo, seed=1)
 
 
 def _add_match(sub) -> None:
@@ -228,11 +306,9 @@ def _add_match(sub) -> None:
     )
     p.add_argument("inputs", nargs="+", help="fragment mesh files, or folders of them")
     p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
-    p.add_argument("--force", action="store_true", help="replace an existing output folder")
-    p.add_argument("--seed", type=_int_at_least(0), default=0, help="random seed (default 0)")
     p.add_argument("--debug-files", action="store_true",
                    help="also write fracture labels as vertex colours (labels/*.ply) and matched keypoints per pair")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_common(p)
     p.set_defaults(func=_cmd_match)
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from . import __version__
 from .errors import ReassembleError
-from .geometry import canonical_order, face_areas
+from .geometry import canonical_order, face_areas, transform_points
 from .io import (
     TRANSFORMS_CONVENTION,
     load_mesh,
@@ -23,6 +23,7 @@ from .io import (
     read_transforms,
     resolve_mesh_path,
     staged_directory,
+    write_glb,
     write_json,
     write_npz,
     write_ply,
@@ -244,7 +245,7 @@ def prepare_fragments(
     radii = size * np.asarray(config.radii)
     params = DescriptorParams(with_d2=False, principal=True)
     descriptors, notes = [], {}
-    for name, (v, f) in zip(names, tqdm(pairs, desc="descriptors", disable=not progress)):
+    for name, (v, f) in tqdm(list(zip(names, pairs)), desc="descriptors", disable=not progress):
         diag = float(np.linalg.norm(np.ptp(v, axis=0)))
         if diag <= radii.max():
             notes[name] = (f"not matched: too small (bounding-box diagonal {diag:.4g}, below the largest "
@@ -280,6 +281,27 @@ def prepare_fragments(
     return out, size
 
 
+_WORKER: dict = {}
+
+
+def _pair_worker_init(surfaces, meshes, size, params) -> None:
+    _WORKER.clear()
+    _WORKER.update(surfaces=surfaces, meshes=meshes, size=size, params=params, scenes={})
+
+
+def _pair_worker(task):
+    from .geometry import make_scene
+    from .registration import register_pair
+
+    i, j, rng = task
+    scenes = _WORKER["scenes"]
+    for k in (i, j):
+        if k not in scenes:
+            scenes[k] = make_scene(*_WORKER["meshes"][k])
+    return (i, j), register_pair(_WORKER["surfaces"][i], _WORKER["surfaces"][j], source_scene=scenes[i],
+                                 target_scene=scenes[j], size=_WORKER["size"], params=_WORKER["params"], rng=rng)
+
+
 def match_pairs(
     fragments: list[PreparedFragment],
     *,
@@ -287,25 +309,46 @@ def match_pairs(
     pairs: list[tuple[int, int]] | None = None,
     params=None,
     seed: int = 0,
+    jobs: int = 1,
     progress: bool = False,
 ) -> dict[tuple[int, int], object]:
-    """Register fragment pairs (all, or the given (source, target) index pairs): PairResult per pair."""
+    """Register fragment pairs (all, or the given (source, target) index pairs): PairResult per pair.
+
+    ``jobs`` > 1 registers pairs in that many processes; every pair has its own random
+    stream (spawned from ``seed`` in pair order), so results do not depend on ``jobs``.
+    """
     from tqdm import tqdm
 
-    from .geometry import make_scene
-    from .registration import RegistrationParams, register_pair
+    from .registration import RegistrationParams
 
     params = params or RegistrationParams()
     if pairs is None:
         pairs = [(i, j) for i in range(len(fragments)) for j in range(i + 1, len(fragments))]
-    scenes = [make_scene(f.vertices, f.faces) for f in fragments]
     rngs = np.random.default_rng(seed).spawn(len(pairs))
+    tasks = [(i, j, rng) for (i, j), rng in zip(pairs, rngs)]
+    init = ([f.surface for f in fragments], [(f.vertices, f.faces) for f in fragments], size, params)
+    bar = tqdm(total=len(tasks), desc="pairs", disable=not progress)
     results = {}
-    for (i, j), rng in zip(tqdm(pairs, desc="pairs", disable=not progress), rngs):
-        results[(i, j)] = register_pair(
-            fragments[i].surface, fragments[j].surface, source_scene=scenes[i], target_scene=scenes[j],
-            size=size, params=params, rng=rng,
-        )
+    if jobs > 1 and len(tasks) > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        # spawn, not fork: the parent holds Open3D and FFT thread pools
+        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=_pair_worker_init, initargs=init) as pool:
+            for key, res in pool.map(_pair_worker, tasks, chunksize=max(1, len(tasks) // (8 * jobs))):
+                results[key] = res
+                bar.update()
+    else:
+        _pair_worker_init(*init)
+        try:
+            for task in tasks:
+                key, res = _pair_worker(task)
+                results[key] = res
+                bar.update()
+        finally:
+            _WORKER.clear()
+    bar.close()
     return results
 
 
@@ -357,9 +400,56 @@ def load_fragments(inputs: list[str | Path]) -> tuple[dict[str, tuple[np.ndarray
     return meshes, warnings
 
 
+def _fragment_entry(f: PreparedFragment) -> dict:
+    return {
+        "faces": len(f.faces), "area": f.surface.area, "fracture_area": f.surface.fracture_area,
+        "fracture_share": f.surface.fracture_area / f.surface.area,
+        "fracture_regions": int(f.segmentation.region.max()) + 1, "keypoints": len(f.surface.keypoints),
+        "notes": [f.note] if f.note else [],
+    }
+
+
+def _pairs_json(frags: list[PreparedFragment], results: dict) -> list[dict]:
+    return [
+        {
+            "source": frags[i].name, "target": frags[j].name, "touching": res.touching,
+            "candidates": [
+                {"T_target_source": c.T_target_source.tolist(), "score": c.score, "contact_area": c.contact_area,
+                 "penetration_area": c.penetration_area, "inliers": c.inliers}
+                for c in res.candidates
+            ],
+        }
+        for (i, j), res in sorted(results.items())
+    ]
+
+
+def _write_debug(tmp: Path, frags: list[PreparedFragment], results: dict) -> None:
+    (tmp / "labels").mkdir()
+    (tmp / "matches").mkdir()
+    for f in frags:
+        colors = np.tile(ORIGINAL_RGB, (len(f.vertices), 1))
+        colors[np.unique(f.faces[f.segmentation.fracture])] = FRACTURE_RGB
+        write_ply(tmp / "labels" / f"{f.name}.ply", f.vertices, f.faces, colors=colors)
+    for (i, j), res in results.items():
+        if res.best is None:
+            continue
+        write_npz(tmp / "matches" / f"{frags[i].name}__{frags[j].name}.npz",
+                  source_points=frags[i].surface.keypoints[res.matches[:, 0]],
+                  target_points=frags[j].surface.keypoints[res.matches[:, 1]],
+                  T_target_source=res.best.T_target_source)
+
+
+def _resolved(seed: int, size: float, **stages) -> dict:
+    out = {"seed": seed, "reference_size": size}
+    out.update({k: dataclasses.asdict(v) for k, v in stages.items()})
+    out["note"] = ("lengths in the stage options are fractions of reference_size "
+                   "(the median fragment bounding-box diagonal)")
+    return out
+
+
 def match_to_folder(
     inputs: list[str | Path], out: str | Path, *, seed: int = 0, force: bool = False, debug: bool = False,
-    config: MatchConfig = MatchConfig(), progress: bool = False,
+    config: MatchConfig = MatchConfig(), jobs: int = 1, progress: bool = False,
 ) -> dict:
     """Segment the fragments, register every pair, and write ``pairs.json`` (+ debug files).
 
@@ -378,51 +468,155 @@ def match_to_folder(
     meshes, warnings = load_fragments(inputs)
     seg_params, reg_params = SegmentParams(), RegistrationParams()
     frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, progress=progress)
-    results = match_pairs(frags, size=size, params=reg_params, seed=seed, progress=progress)
-    frag_report = {}
-    for f in frags:
-        notes = [f.note] if f.note else []
-        frag_report[f.name] = {
-            "faces": len(f.faces), "area": f.surface.area, "fracture_area": f.surface.fracture_area,
-            "fracture_share": f.surface.fracture_area / f.surface.area,
-            "fracture_regions": int(f.segmentation.region.max()) + 1, "keypoints": len(f.surface.keypoints),
-            "notes": notes,
-        }
-    pairs = []
-    for (i, j), res in sorted(results.items()):
-        pairs.append({
-            "source": frags[i].name, "target": frags[j].name, "touching": res.touching,
-            "candidates": [
-                {"T_target_source": c.T_target_source.tolist(), "score": c.score, "contact_area": c.contact_area,
-                 "penetration_area": c.penetration_area, "inliers": c.inliers}
-                for c in res.candidates
-            ],
-        })
-    resolved = {
-        "seed": seed, "reference_size": size,
-        "match": dataclasses.asdict(config), "segmentation": dataclasses.asdict(seg_params),
-        "registration": dataclasses.asdict(reg_params),
-        "note": "lengths in match/segmentation/registration are fractions of reference_size "
-                "(the median fragment bounding-box diagonal)",
-    }
+    results = match_pairs(frags, size=size, params=reg_params, seed=seed, jobs=jobs, progress=progress)
+    pairs = _pairs_json(frags, results)
     with staged_directory(out, force=force) as tmp:
         write_json(tmp / "pairs.json", {"format": "reassemble-pairs/1", "convention": "T_target_source",
                                         "version": __version__, "pairs": pairs})
-        write_json(tmp / "fragments.json", {"fragments": frag_report, "warnings": warnings})
-        write_json(tmp / "config.json", resolved)
+        write_json(tmp / "fragments.json", {"fragments": {f.name: _fragment_entry(f) for f in frags},
+                                            "warnings": warnings})
+        write_json(tmp / "config.json", _resolved(seed, size, match=config, segmentation=seg_params,
+                                                  registration=reg_params))
         if debug:
-            (tmp / "labels").mkdir()
-            (tmp / "matches").mkdir()
-            for f in frags:
-                colors = np.tile(ORIGINAL_RGB, (len(f.vertices), 1))
-                colors[np.unique(f.faces[f.segmentation.fracture])] = FRACTURE_RGB
-                write_ply(tmp / "labels" / f"{f.name}.ply", f.vertices, f.faces, colors=colors)
-            for (i, j), res in results.items():
-                if res.best is None:
-                    continue
-                write_npz(tmp / "matches" / f"{frags[i].name}__{frags[j].name}.npz",
-                          source_points=frags[i].surface.keypoints[res.matches[:, 0]],
-                          target_points=frags[j].surface.keypoints[res.matches[:, 1]],
-                          T_target_source=res.best.T_target_source)
+            _write_debug(tmp, frags, results)
     return {"fragments": len(frags), "pairs": len(pairs), "touching": sum(p["touching"] for p in pairs),
             "warnings": warnings, "pair_list": pairs}
+
+
+def fragment_colors(n: int) -> np.ndarray:
+    """(n, 3) uint8 distinct colours (hues a golden angle apart), the same for the same n."""
+    import colorsys
+
+    return np.array([[round(255 * c) for c in colorsys.hsv_to_rgb((0.61803398875 * k) % 1.0, 0.55, 0.9)]
+                     for k in range(n)], dtype=np.uint8)
+
+
+TRANSFORMS_FORMAT = "reassemble-transforms/1"
+
+
+def run_to_folder(
+    inputs: list[str | Path], out: str | Path, *, seed: int = 0, force: bool = False, debug: bool = False,
+    config: MatchConfig = MatchConfig(), assembly_params=None, jobs: int = 1, progress: bool = False,
+) -> dict:
+    """The main job: fragments in, the assembled object and its report out.
+
+    Writes into ``out`` (built aside, moved into place only when complete, so no
+    half-written ``transforms.json`` is ever left): ``transforms.json`` (per file stem
+    ``T_world_fragment``, ``placed``, ``confidence``, ``group``), ``assembled.glb`` (one
+    named node per fragment, its pose as the node transform), ``assembled.ply`` (the placed
+    fragments in world coordinates, one colour each), ``report.json``, ``pairs.json``,
+    ``config.json``; with ``debug`` the files of :func:`match_to_folder`'s ``debug``.
+
+    Returns the report (a dict).
+    """
+    import time
+
+    from .assembly import AssemblyParams, assemble, world_poses
+    from .registration import RegistrationParams
+    from .segmentation import SegmentParams
+
+    if Path(out).exists() and not force:  # before minutes of work, not after
+        raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
+    timings = {}
+    t0 = time.perf_counter()
+    meshes, warnings = load_fragments(inputs)
+    seg_params, reg_params = SegmentParams(), RegistrationParams()
+    assembly_params = assembly_params or AssemblyParams()
+    frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, progress=progress)
+    t1 = time.perf_counter()
+    results = match_pairs(frags, size=size, params=reg_params, seed=seed, jobs=jobs, progress=progress)
+    t2 = time.perf_counter()
+    if progress:
+        log.info("assembling %d fragments", len(frags))
+    surfaces = [f.surface for f in frags]
+    A = assemble(surfaces, [(f.vertices, f.faces) for f in frags], results, size=size, params=assembly_params,
+                 reg_params=reg_params, seed=seed)
+    T_world = world_poses(A, surfaces, gap=0.1 * size)
+    t3 = time.perf_counter()
+    timings.update(prepare=t1 - t0, pairs=t2 - t1, assembly=t3 - t2)
+
+    names = [f.name for f in frags]
+    neighbours = {n: [] for n in names}
+    for c in A.contacts:
+        neighbours[names[c.a]].append(names[c.b])
+        neighbours[names[c.b]].append(names[c.a])
+    transforms = {
+        "format": TRANSFORMS_FORMAT, "convention": TRANSFORMS_CONVENTION, "version": __version__, "seed": seed,
+        "world": f"the coordinates of fragment {names[_largest(A, frags)]!r}'s file "
+                 "(the largest fragment of the main assembly)",
+        "fragments": {
+            n: {"transform": T_world[k].tolist(), "placed": bool(A.placed[k]),
+                "confidence": _round(A.confidence[k]), "group": int(A.group[k])}
+            for k, n in enumerate(names)
+        },
+    }
+    groups = [[names[k] for k in np.flatnonzero(A.group == g)] for g in range(int(A.group.max()) + 1)]
+    fragment_report = {}
+    for k, f in enumerate(frags):
+        entry = {"placed": bool(A.placed[k]), "group": int(A.group[k]), "confidence": _round(A.confidence[k]),
+                 "neighbours": sorted(neighbours[f.name])}
+        entry.update(_fragment_entry(f))
+        if not A.placed[k]:
+            entry["notes"].append("not placed: no verified contact with the main assembly"
+                                  + (f" (in sub-assembly {A.group[k]} with {len(groups[A.group[k]]) - 1} other(s))"
+                                     if len(groups[A.group[k]]) > 1 else ""))
+        fragment_report[f.name] = entry
+    report = {
+        "format": "reassemble-report/1", "version": __version__,
+        "summary": {
+            "fragments": len(frags), "placed": int(A.placed.sum()),
+            "sub_assemblies": sum(len(g) > 1 for g in groups), "alone": sum(len(g) == 1 for g in groups),
+            "contacts": len(A.contacts), "timings_s": {k: round(v, 2) for k, v in timings.items()},
+        },
+        "groups": groups,
+        "fragments": fragment_report,
+        "contacts": [{"fragments": [names[c.a], names[c.b]], "score": _round(c.score),
+                      "contact_area": _round(c.contact_area), "penetration_area": _round(c.penetration_area)}
+                     for c in A.contacts],
+        "warnings": warnings,
+    }
+    colors = fragment_colors(len(frags))
+    with staged_directory(out, force=force) as tmp:
+        write_json(tmp / "pairs.json", {"format": "reassemble-pairs/1", "convention": "T_target_source",
+                                        "version": __version__, "pairs": _pairs_json(frags, results)})
+        write_json(tmp / "report.json", report)
+        write_json(tmp / "config.json", _resolved(seed, size, match=config, segmentation=seg_params,
+                                                  registration=reg_params, assembly=assembly_params))
+        write_glb(tmp / "assembled.glb", {f.name: (f.vertices, f.faces) for f in frags},
+                  {n: T_world[k] for k, n in enumerate(names)}, colors=dict(zip(names, colors)))
+        placed = np.flatnonzero(A.placed)
+        if len(placed):
+            offsets = np.cumsum([0] + [len(frags[k].vertices) for k in placed])
+            write_ply(tmp / "assembled.ply",
+                      np.vstack([transform_points(T_world[k], frags[k].vertices) for k in placed]),
+                      np.vstack([frags[k].faces + o for k, o in zip(placed, offsets)]),
+                      colors=np.vstack([np.tile(colors[k], (len(frags[k].vertices), 1)) for k in placed]))
+        if debug:
+            _write_debug(tmp, frags, results)
+        write_json(tmp / "transforms.json", transforms)  # last: its presence means the run completed
+    return report
+
+
+def _largest(A, frags) -> int:
+    main = np.flatnonzero(A.group == 0)
+    return int(main[np.argmax([frags[k].surface.area for k in main])])
+
+
+def demo_to_folder(
+    out: str | Path, *, mesh: str = "spot", pieces: int = 8, seed: int = 1, force: bool = False, jobs: int = 1,
+    progress: bool = False,
+) -> tuple[dict, dict]:
+    """Break ``mesh`` into ``out/puzzle``, reassemble it into ``out/result`` and score it.
+
+    Returns the run's report and the score (also written to ``out/result/score.json``).
+    """
+    from .synth import BreakParams
+
+    out = Path(out)
+    if out.exists() and not force:
+        raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
+    puzzle = break_to_folder(mesh, out / "puzzle", params=BreakParams(pieces=pieces), seed=seed, force=True)
+    report = run_to_folder([puzzle / "fragments"], out / "result", seed=seed, force=True, jobs=jobs, progress=progress)
+    score = evaluate_files(out / "result" / "transforms.json", puzzle / "ground_truth.json")
+    write_json(out / "result" / "score.json", score)
+    return report, score

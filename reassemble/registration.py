@@ -299,23 +299,38 @@ def contact_score(
     tol: float,
     params: RegistrationParams,
 ) -> tuple[float, float, float]:
-    """(score, contact area, penetration area) of a placement."""
+    """(score, contact area, penetration area) of a placement.
+
+    Only points inside the other fragment's bounding box (grown by the tolerance and the
+    sample spacing) are queried: the others can neither touch nor be inside it.
+    """
     import open3d as o3d
 
     cos_tol = np.cos(np.radians(params.normal_angle))
-    moved = transform_points(T_target_source, source.samples).astype(np.float32)
-    turned = source.sample_normals @ T_target_source[:3, :3].T
-    closest = target_scene.compute_closest_points(o3d.core.Tensor(moved))
-    dist = np.linalg.norm(closest["points"].numpy() - moved, axis=1)
-    opposed = np.einsum("ij,ij->i", turned, closest["primitive_normals"].numpy()) < -cos_tol
-    contact = float(np.count_nonzero((dist < tol) & opposed)) * source.sample_area
+
+    def within(points, surf):
+        margin = tol + 2.0 * np.sqrt(surf.surface_area)
+        lo, hi = surf.surface.min(axis=0) - margin, surf.surface.max(axis=0) + margin
+        return np.all((points >= lo) & (points <= hi), axis=1)
+
+    def inside(scene, points):
+        return int(np.count_nonzero(scene.compute_signed_distance(
+            o3d.core.Tensor(points.astype(np.float32))).numpy() < -tol)) if len(points) else 0
+
+    moved = transform_points(T_target_source, source.samples)
+    near = within(moved, target)
+    contact = 0.0
+    if near.any():
+        closest = target_scene.compute_closest_points(o3d.core.Tensor(moved[near].astype(np.float32)))
+        dist = np.linalg.norm(closest["points"].numpy() - moved[near], axis=1)
+        turned = source.sample_normals[near] @ T_target_source[:3, :3].T
+        opposed = np.einsum("ij,ij->i", turned, closest["primitive_normals"].numpy()) < -cos_tol
+        contact = float(np.count_nonzero((dist < tol) & opposed)) * source.sample_area
     # penetration both ways: whole-surface samples deeper than the tolerance inside the other
-    inside_t = target_scene.compute_signed_distance(
-        o3d.core.Tensor(transform_points(T_target_source, source.surface).astype(np.float32))).numpy() < -tol
-    inside_s = source_scene.compute_signed_distance(
-        o3d.core.Tensor(transform_points(invert_transform(T_target_source), target.surface).astype(np.float32))
-    ).numpy() < -tol
-    penetration = (float(inside_t.sum()) * source.surface_area + float(inside_s.sum()) * target.surface_area)
+    s_in_t = transform_points(T_target_source, source.surface)
+    t_in_s = transform_points(invert_transform(T_target_source), target.surface)
+    penetration = (inside(target_scene, s_in_t[within(s_in_t, target)]) * source.surface_area
+                   + inside(source_scene, t_in_s[within(t_in_s, source)]) * target.surface_area)
     smaller = min(source.area, target.area)
     return (contact - params.penetration_weight * penetration) / smaller, contact, penetration
 
@@ -379,11 +394,18 @@ def register_pair(
         quick.append((ok.sum() * source.sample_area * len(source.samples) / 1000
                       - params.penetration_weight * inside * source.surface_area * len(source.surface) / 500, i, coarse))
     quick.sort(key=lambda q: -q[0])
-    for _, i, coarse in quick[: params.candidates]:
+    # different hypotheses often converge to one pose: keep distinct ones, so the
+    # assembly gets real alternatives (up to twice as many refinements as candidates)
+    for _, i, coarse in quick[: 2 * params.candidates]:
         refined = icp(source, target, coarse, tol=tol, normal_angle=params.normal_angle, tree=tree)
+        if _distinct(np.array([c.T_target_source for c in candidates] + [refined]), len(candidates) + 1,
+                     tol=rtol)[-1:] != [len(candidates)]:
+            continue
         score, contact, pen = contact_score(source, target, refined, source_scene=source_scene,
                                             target_scene=target_scene, tol=tol, params=params)
         candidates.append(Candidate(refined, score, contact, pen, int(inliers[i])))
+        if len(candidates) == params.candidates:
+            break
     candidates.sort(key=lambda c: -c.score)
     matches = np.zeros((0, 2), int)
     if candidates:

@@ -1,0 +1,449 @@
+"""Global assembly: from ranked pairwise candidates to one pose per fragment.
+
+1. greedy merging of sub-assemblies (after Huang et al. 2006): every candidate placement
+   of a pair proposes to merge the two sub-assemblies holding its fragments; a proposal
+   is verified on *all* fragment pairs it brings together (loop verification: where two
+   sub-assemblies touch in several places, every contact adds to the gain and any
+   interpenetration rejects it), and the best verified proposal is merged first;
+2. joint refinement of all poses of a sub-assembly: point-to-plane least squares over
+   every contact at once, so loop errors are spread instead of piled on the last piece;
+3. per fragment a confidence (share of its fracture surface in contact with its placed
+   neighbours) and per contact the score, contact and penetration areas.
+
+A fragment whose best proposal does not verify stays alone: ``placed`` false, never forced in.
+Poses are ``T_group_fragment`` within each sub-assembly; the largest sub-assembly (by area)
+is group 0, and its largest fragment is the world frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .features import FractureSurface
+from .geometry import invert_transform, transform_points
+from .registration import RegistrationParams, contact_score
+
+
+@dataclass(frozen=True)
+class AssemblyParams:
+    """Options of :func:`assemble`; lengths are fractions of the reference size.
+
+    Parameters
+    ----------
+    candidates : candidate placements per pair that may propose a merge
+    min_gain : a merge needs at least this verified gain (sum of the pair scores it creates)
+    max_penetration : a merge is rejected when any two fragments it brings together
+        interpenetrate by more than this share of the smaller one's surface area
+    refine_iterations : joint point-to-plane iterations per sub-assembly
+    group_rounds : rounds of registering whole sub-assemblies against each other
+    verify_samples : samples per fragment when verifying a merge
+    """
+
+    candidates: int = 5
+    min_gain: float = 0.02
+    max_penetration: float = 0.02
+    refine_iterations: int = 15
+    group_rounds: int = 3
+    verify_samples: int = 1000
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Two fragments touching in the final assembly (``a`` < ``b``, indices)."""
+
+    a: int
+    b: int
+    score: float
+    contact_area: float
+    penetration_area: float
+
+
+@dataclass
+class Assembly:
+    """Result of :func:`assemble` for n fragments.
+
+    Attributes
+    ----------
+    T_group_fragment : (n, 4, 4) pose of each fragment in its sub-assembly's frame
+    group : (n,) int, sub-assembly of each fragment; 0 is the largest by area
+    placed : (n,) bool, in group 0 together with at least one other fragment
+    confidence : (n,) float in [0, 1], share of the fracture area in contact with the
+        fragment's neighbours in its group (0 for a fragment alone)
+    contacts : list[Contact] of touching pairs within the sub-assemblies
+    merges : list of (source, target, gain) in the order merged
+    """
+
+    T_group_fragment: np.ndarray
+    group: np.ndarray
+    placed: np.ndarray
+    confidence: np.ndarray
+    contacts: list[Contact] = field(default_factory=list)
+    merges: list[tuple[int, int, float]] = field(default_factory=list)
+
+
+def _spheres(surfaces: list[FractureSurface]) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding-sphere centres (n, 3) and radii (n,) of the fragments' surface samples."""
+    centres = np.array([s.surface.mean(axis=0) for s in surfaces])
+    radii = np.array([np.linalg.norm(s.surface - c, axis=1).max() for s, c in zip(surfaces, centres)])
+    return centres, radii
+
+
+def _near(T_p: np.ndarray, T_q: np.ndarray, p: int, q: int, centres, radii, margin: float) -> bool:
+    """Whether fragments p and q, posed in a common frame, may touch."""
+    cp = T_p[:3, :3] @ centres[p] + T_p[:3, 3]
+    cq = T_q[:3, :3] @ centres[q] + T_q[:3, 3]
+    return float(np.linalg.norm(cp - cq)) <= radii[p] + radii[q] + margin
+
+
+def _thinned(surface: FractureSurface, count: int) -> FractureSurface:
+    """The same surface with at most ``count`` samples of each kind (the first: they are in random order)."""
+    q, p = min(count, len(surface.samples)), min(count, len(surface.surface))
+    return dataclasses.replace(
+        surface, samples=surface.samples[:q], sample_normals=surface.sample_normals[:q],
+        sample_area=surface.sample_area * len(surface.samples) / max(q, 1),
+        surface=surface.surface[:p], surface_area=surface.surface_area * len(surface.surface) / max(p, 1))
+
+
+def _evaluate(pairs, poses, surfaces, scenes, *, tol, reg_params, centres, radii, cache):
+    """Pair scores (score, contact, penetration) of the given fragment pairs at the given poses."""
+    out = {}
+    for p, q in pairs:
+        if not _near(poses[p], poses[q], p, q, centres, radii, tol):
+            continue
+        T_q_p = invert_transform(poses[q]) @ poses[p]
+        key = (p, q, np.round(T_q_p, 9).tobytes())
+        if key not in cache:
+            cache[key] = contact_score(surfaces[p], surfaces[q], T_q_p, source_scene=scenes[p],
+                                       target_scene=scenes[q], tol=tol, params=reg_params)
+        out[(p, q)] = cache[key]
+    return out
+
+
+def _merge(proposals, state, *, surfaces, scenes, areas, tol, params, reg_params, centres, radii, cache):
+    """Greedy verified merging (in place on ``state``); returns the merges made."""
+    group, poses, members = state
+    merges = []
+    while True:
+        best = None
+        for i, j, T_j_i, score in proposals:
+            a, b = group[i], group[j]
+            if a == b:
+                continue
+            # the source's sub-assembly a moves into the frame of the target's, b
+            T_b_a = poses[j] @ T_j_i @ invert_transform(poses[i])
+            moved = {q: T_b_a @ poses[q] for q in members[a]}
+            if len(members[a]) == 1 and len(members[b]) == 1:
+                gain, ok = score, True  # the pair itself, scored by registration
+            else:
+                trial = dict(moved)
+                trial.update({p: poses[p] for p in members[b]})
+                scores = _evaluate([(q, p) for q in members[a] for p in members[b]], trial, surfaces, scenes,
+                                   tol=tol, reg_params=reg_params, centres=centres, radii=radii, cache=cache)
+                ok = all(pen <= params.max_penetration * min(areas[p], areas[q])
+                         for (q, p), (_, _, pen) in scores.items())
+                gain = sum(s for s, _, _ in scores.values())
+            if ok and gain >= params.min_gain and (best is None or gain > best[0]):
+                best = (gain, i, j, moved)
+        if best is None:
+            return merges
+        gain, i, j, moved = best
+        a, b = group[i], group[j]
+        for q, T in moved.items():
+            poses[q] = T
+            group[q] = b
+        members[b] += members.pop(a)
+        merges.append((i, j, float(gain)))
+
+
+def group_surface(surfaces: list[FractureSurface], T_group_fragment: np.ndarray, *, tol: float) -> FractureSurface:
+    """One FractureSurface for a sub-assembly: its members' fracture surfaces that are still
+    free (farther than ``2 tol`` from another member's), in the group frame.
+
+    The samples of the members are thinned to one common density (the coarsest member's),
+    taking each member's first samples (they are in random order), so the result is
+    deterministic.
+    """
+    m = len(surfaces)
+    moved = [transform_points(T_group_fragment[k], s.samples) for k, s in enumerate(surfaces)]
+    free_samples, free_keys = [], []
+    for k, s in enumerate(surfaces):
+        others = [moved[o] for o in range(m) if o != k and len(moved[o])]
+        if others and len(moved[k]):
+            tree = cKDTree(np.vstack(others))
+            free_samples.append(~np.isfinite(tree.query(moved[k], distance_upper_bound=2 * tol)[0]))
+            keys = transform_points(T_group_fragment[k], s.keypoints)
+            free_keys.append(~np.isfinite(tree.query(keys, distance_upper_bound=2 * tol)[0]) if len(keys)
+                             else np.zeros(0, bool))
+        else:
+            free_samples.append(np.ones(len(s.samples), bool))
+            free_keys.append(np.ones(len(s.keypoints), bool))
+
+    def thin(points, normals, keep, unit):
+        """Concatenate each member's kept points, thinned to one area per point (the largest)."""
+        common = max(unit)
+        out_p, out_n = [], []
+        for k in range(m):
+            idx = np.flatnonzero(keep[k])
+            idx = idx[: int(round(len(idx) * unit[k] / common))] if common > 0 else idx[:0]
+            out_p.append(transform_points(T_group_fragment[k], points[k][idx]))
+            if normals is not None:
+                out_n.append(normals[k][idx] @ T_group_fragment[k][:3, :3].T)
+        return np.vstack(out_p), (np.vstack(out_n) if normals is not None else None), common
+
+    samples, sample_normals, sample_area = thin([s.samples for s in surfaces], [s.sample_normals for s in surfaces],
+                                                free_samples, [s.sample_area for s in surfaces])
+    surface, _, surface_area = thin([s.surface for s in surfaces], None,
+                                    [np.ones(len(s.surface), bool) for s in surfaces],
+                                    [s.surface_area for s in surfaces])
+    R = [T[:3, :3] for T in T_group_fragment]
+    return FractureSurface(
+        keypoints=np.vstack([transform_points(T_group_fragment[k], s.keypoints[free_keys[k]])
+                             for k, s in enumerate(surfaces)]),
+        keypoint_normals=np.vstack([s.keypoint_normals[free_keys[k]] @ R[k].T for k, s in enumerate(surfaces)]),
+        signature=np.vstack([s.signature[free_keys[k]] for k, s in enumerate(surfaces)]),
+        samples=samples,
+        sample_normals=sample_normals,
+        sample_area=sample_area,
+        surface=surface,
+        surface_area=surface_area,
+        fracture_area=float(sum(f.sum() * s.sample_area for f, s in zip(free_samples, surfaces))),
+        area=float(sum(s.area for s in surfaces)),
+    )
+
+
+def assemble(
+    surfaces: list[FractureSurface],
+    meshes: list[tuple[np.ndarray, np.ndarray]],
+    pair_results: dict,
+    *,
+    size: float,
+    params: AssemblyParams = AssemblyParams(),
+    reg_params: RegistrationParams = RegistrationParams(),
+    seed: int = 0,
+) -> Assembly:
+    """Merge fragments into sub-assemblies from their pairwise candidates, then refine.
+
+    When greedy merging stops, the sub-assemblies themselves are registered against each
+    other (their free fracture surfaces, :func:`group_surface`): a piece that touches a
+    sub-assembly in several small places, none enough alone, is found this way. Up to
+    ``params.group_rounds`` such rounds.
+
+    Parameters
+    ----------
+    surfaces : FractureSurface per fragment
+    meshes : (vertices, faces) per fragment, closed, in its own coordinates
+    pair_results : (source, target) index pair -> PairResult with ``T_target_source`` candidates
+    size : reference size (mesh units)
+    params : AssemblyParams
+    reg_params : the RegistrationParams the candidates were scored with (tolerance, weights)
+    seed : for the sub-assembly registrations
+
+    Returns
+    -------
+    Assembly
+    """
+    from .geometry import make_scene
+    from .registration import register_pair
+
+    n = len(surfaces)
+    tol = reg_params.tolerance * size
+    scenes = [make_scene(v, f) for v, f in meshes]
+    centres, radii = _spheres(surfaces)
+    areas = np.array([s.area for s in surfaces])
+    group = np.arange(n)
+    poses = np.tile(np.eye(4), (n, 1, 1))  # T_group_fragment
+    members = {k: [k] for k in range(n)}
+    state = (group, poses, members)
+    proposals = []  # (source, target, T_target_source, score)
+    for (i, j), res in sorted(pair_results.items()):
+        for c in res.candidates[: params.candidates]:
+            if c.score >= params.min_gain:
+                proposals.append((i, j, c.T_target_source, c.score))
+    cache: dict = {}
+    # merges are ranked and verified on a thinned sample (4x fewer queries); final contacts use all
+    quick = [_thinned(s, params.verify_samples) for s in surfaces]
+    common = dict(surfaces=quick, scenes=scenes, areas=areas, tol=tol, params=params, reg_params=reg_params,
+                  centres=centres, radii=radii, cache=cache)
+    merges = _merge(proposals, state, **common)
+    tried = set()
+    rng = np.random.default_rng(seed)
+    for _ in range(params.group_rounds):
+        keys = sorted(members, key=lambda r: min(members[r]))
+        new = []
+        for x, ga in enumerate(keys):
+            for gb in keys[x + 1:]:
+                a, b = sorted(members[ga]), sorted(members[gb])
+                if len(a) == 1 and len(b) == 1 or (tuple(a), tuple(b)) in tried:
+                    continue
+                tried.add((tuple(a), tuple(b)))
+                sa = group_surface([surfaces[k] for k in a], poses[a], tol=tol)
+                sb = group_surface([surfaces[k] for k in b], poses[b], tol=tol)
+                scene_a = make_scene(*_union([meshes[k] for k in a], poses[a]))
+                scene_b = make_scene(*_union([meshes[k] for k in b], poses[b]))
+                res = register_pair(sa, sb, source_scene=scene_a, target_scene=scene_b, size=size,
+                                    params=reg_params, rng=rng)
+                for c in res.candidates[: params.candidates]:
+                    # any member pair carries the motion; the merge verifies all of them
+                    new.append((a[0], b[0], invert_transform(poses[b[0]]) @ c.T_target_source @ poses[a[0]],
+                                c.score))
+        if not new:
+            break
+        proposals += new
+        more = _merge(proposals, state, **common)
+        merges += more
+        if not more:
+            break
+
+    for g in members.values():
+        if len(g) > 1:
+            poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
+                              iterations=params.refine_iterations, anchor=int(np.argmax(areas[g])))
+
+    # contacts at the final poses, and the groups renumbered by area
+    contacts = []
+    touching = np.zeros(n)
+    for g in members.values():
+        pairs = sorted((min(p, q), max(p, q)) for x, p in enumerate(g) for q in g[x + 1:])
+        for (p, q), (s, c, pen) in sorted(_evaluate(pairs, poses, surfaces, scenes, tol=tol, reg_params=reg_params,
+                                                    centres=centres, radii=radii, cache={}).items()):
+            if c > 0:
+                contacts.append(Contact(p, q, float(s), float(c), float(pen)))
+                touching[p] += c
+                touching[q] += c
+    order = sorted(members, key=lambda r: (-areas[members[r]].sum(), min(members[r])))
+    renumber = {r: k for k, r in enumerate(order)}
+    group = np.array([renumber[r] for r in group])
+    for g in members.values():  # each group's frame: its largest fragment's
+        ref = invert_transform(poses[g[int(np.argmax(areas[g]))]])
+        poses[g] = ref[None] @ poses[g]
+    placed = (group == 0) & (len(members[order[0]]) > 1)
+    fracture = np.array([s.fracture_area for s in surfaces])
+    confidence = np.where(fracture > 0, np.minimum(1.0, touching / np.maximum(fracture, 1e-300)), 0.0)
+    return Assembly(poses, group, placed, confidence, contacts, merges)
+
+
+def _union(meshes: list[tuple[np.ndarray, np.ndarray]], T_group_fragment: np.ndarray):
+    """(vertices, faces) of several meshes placed in one frame."""
+    vertices, faces, offset = [], [], 0
+    for (v, f), T in zip(meshes, T_group_fragment):
+        vertices.append(transform_points(T, v))
+        faces.append(f + offset)
+        offset += len(v)
+    return np.vstack(vertices), np.vstack(faces)
+
+
+def refine(
+    T_group_fragment: np.ndarray,
+    surfaces: list[FractureSurface],
+    *,
+    tol: float,
+    normal_angle: float = 30.0,
+    iterations: int = 15,
+    anchor: int = 0,
+    levels: tuple[float, ...] = (2.0, 1.0),
+) -> np.ndarray:
+    """Joint point-to-plane refinement of the poses of one sub-assembly.
+
+    Every pair of fragments contributes its fracture samples within a distance threshold
+    (``levels`` times ``tol``, coarse to fine) of the other's, with opposed normals; all
+    poses but the anchor's move at once (linearized rotations, damped least squares).
+
+    Parameters
+    ----------
+    T_group_fragment : (m, 4, 4) poses in a common frame
+    surfaces : FractureSurface per fragment
+    tol : contact tolerance (mesh units)
+    normal_angle : degrees from exactly opposed normals still counted
+    iterations : per level
+    anchor : index of the fragment that stays fixed
+
+    Returns
+    -------
+    (m, 4, 4) refined poses (a new array)
+    """
+    from .registration import _rotation
+
+    T = np.array(T_group_fragment, dtype=float, copy=True)
+    m = len(T)
+    cos_tol = np.cos(np.radians(normal_angle))
+    free = [k for k in range(m) if k != anchor]
+    col = {k: 6 * x for x, k in enumerate(free)}
+    centres, radii = _spheres(surfaces)
+    for distance in (f * tol for f in levels):
+        pairs = [(p, q) for p in range(m) for q in range(m) if p != q and len(surfaces[p].samples)
+                 and len(surfaces[q].samples) and _near(T[p], T[q], p, q, centres, radii, distance)]
+        for _ in range(iterations):
+            pts = [transform_points(T[k], s.samples) for k, s in enumerate(surfaces)]
+            nrm = [s.sample_normals @ T[k][:3, :3].T for k, s in enumerate(surfaces)]
+            trees = {q: cKDTree(pts[q]) for q in {q for _, q in pairs}}
+            AtA = np.zeros((6 * len(free), 6 * len(free)))
+            Atb = np.zeros(6 * len(free))
+            rows = 0
+            for p, q in pairs:
+                d, j = trees[q].query(pts[p], distance_upper_bound=distance)
+                ok = np.isfinite(d)
+                ok[ok] = np.einsum("ij,ij->i", nrm[p][ok], nrm[q][j[ok]]) < -cos_tol
+                if not ok.any():
+                    continue
+                P, Q, N = pts[p][ok], pts[q][j[ok]], nrm[q][j[ok]]
+                r = np.einsum("ij,ij->i", P - Q, N)
+                blocks = []
+                if p in col:
+                    blocks.append((col[p], np.hstack([np.cross(P, N), N])))
+                if q in col:
+                    blocks.append((col[q], -np.hstack([np.cross(Q, N), N])))
+                for ca, Ja in blocks:
+                    Atb[ca:ca + 6] -= Ja.T @ r
+                    for cb, Jb in blocks:
+                        AtA[ca:ca + 6, cb:cb + 6] += Ja.T @ Jb
+                rows += len(r)
+            if rows < 6:
+                return T
+            scale = max(np.trace(AtA) / max(len(AtA), 1), 1e-300)
+            x = np.linalg.solve(AtA + 1e-6 * scale * np.eye(len(AtA)), Atb)
+            for k, c in col.items():
+                step = np.eye(4)
+                step[:3, :3] = _rotation(x[c:c + 3])
+                step[:3, 3] = x[c + 3:c + 6]
+                T[k] = step @ T[k]
+            if np.abs(x).max() < 1e-7 * max(tol, 1e-300):
+                break
+    return T
+
+
+
+
+def world_poses(assembly: Assembly, surfaces: list[FractureSurface], *, gap: float) -> np.ndarray:
+    """``T_world_fragment`` for every fragment: group 0 where it is (the world frame is its
+    largest fragment's), every other sub-assembly and lone fragment moved beside it along
+    +x, ``gap`` apart, so a picture or a viewer shows them apart and never overlapping.
+
+    Returns
+    -------
+    (n, 4, 4)
+    """
+    T = np.array(assembly.T_group_fragment, dtype=float, copy=True)
+
+    def box(members):
+        pts = np.vstack([transform_points(T[k], surfaces[k].surface) for k in members])
+        return pts.min(axis=0), pts.max(axis=0)
+
+    lo, hi = box(np.flatnonzero(assembly.group == 0))
+    x = hi[0] + gap
+    for g in range(1, int(assembly.group.max()) + 1):
+        members = np.flatnonzero(assembly.group == g)
+        if len(members) == 0:
+            continue
+        glo, ghi = box(members)
+        shift = np.eye(4)
+        shift[:3, 3] = [x - glo[0], 0.5 * (lo[1] + hi[1] - glo[1] - ghi[1]), 0.5 * (lo[2] + hi[2] - glo[2] - ghi[2])]
+        T[members] = shift[None] @ T[members]
+        x += ghi[0] - glo[0] + gap
+    return T
+
+
+__all__ = ["Assembly", "AssemblyParams", "Contact", "assemble", "group_surface", "refine", "world_poses"]

@@ -176,3 +176,40 @@ def test_match_bad_input(tmp_path):
     rc, _, err = run("match", one, "--out", tmp_path / "o")
     assert_one_line_error(rc, err, "at least two")
     assert not (tmp_path / "o").exists()
+
+
+def test_run_and_demo(puzzle_dir, tmp_path):
+    rc, out, err = run("run", puzzle_dir / "fragments", "--out", tmp_path / "r", "--quiet", "--jobs", 1)
+    assert rc == 0, err
+    assert "4 of 4 fragments placed" in out
+    assert {"transforms.json", "assembled.glb", "assembled.ply", "report.json"} <= {
+        p.name for p in (tmp_path / "r").iterdir()}
+    rc, out, err = run("eval", tmp_path / "r" / "transforms.json", puzzle_dir / "ground_truth.json")
+    assert rc == 0, err
+    rc, out, err = run("demo", "--mesh", "spot_low_resolution", "--pieces", 3, "--out", tmp_path / "d", "--quiet")
+    assert rc == 0, err
+    assert "3 of 3 fragments placed" in out and "solved" in out
+    score = json.loads((tmp_path / "d" / "result" / "score.json").read_text())
+    assert score["alignments"]["anchor_largest"]["summary"]["solved"]
+    rc, _, err = run("demo", "--mesh", "spot_low_resolution", "--pieces", 3, "--out", tmp_path / "d", "--quiet")
+    assert_one_line_error(rc, err, "exists", "--force")
+
+
+def test_run_bad_input(tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    rc, _, err = run("run", empty, "--out", tmp_path / "o")
+    assert_one_line_error(rc, err, "no mesh files")
+    rc, _, err = run("run", tmp_path / "missing", "--out", tmp_path / "o")
+    assert_one_line_error(rc, err, "no such file")
+    one = tmp_path / "one"
+    one.mkdir()
+    trimesh.creation.box().export(one / "a.ply")
+    (one / "b.ply").write_bytes(b"ply\nrandom bytes")
+    rc, _, err = run("run", one, "--out", tmp_path / "o")
+    # the unreadable file is warned about, then the one-line error
+    assert rc == 2 and "Traceback" not in err and "b.ply" in err
+    assert err.strip().splitlines()[-1].startswith("reassemble: error:") and "at least two" in err
+    assert not (tmp_path / "o").exists()
+    rc, _, err = run("run", one, "--out", tmp_path / "o", "--jobs", "-1")
+    assert rc == 2 and "Traceback" not in err

@@ -1,0 +1,184 @@
+"""Global assembly and `reassemble run`: the smoke set solved, outputs, strays, determinism."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from data_synth.sets import smoke_set
+from reassemble.assembly import Assembly, refine, world_poses
+from reassemble.errors import ReassembleError
+from reassemble.geometry import invert_transform, make_transform, random_rotation, rotation_angle_deg
+from reassemble.io import read_transforms
+from reassemble.pipeline import break_to_folder, evaluate_files, prepare_fragments, read_puzzle, run_to_folder
+from reassemble.synth import BreakParams
+
+from .conftest import tree_digest
+
+
+def _score(run_dir, puzzle_dir) -> dict:
+    report = evaluate_files(run_dir / "transforms.json", puzzle_dir / "ground_truth.json")
+    return report["alignments"]["anchor_largest"]["summary"]
+
+
+@pytest.fixture(scope="module")
+def run_dir(puzzle_dir, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "out"
+    run_to_folder([puzzle_dir / "fragments"], out, seed=0)
+    return out
+
+
+@pytest.mark.parametrize("spec", smoke_set(), ids=lambda s: s.name)
+def test_run_solves_smoke_set(spec, tmp_path):
+    puzzle = tmp_path / "puzzle"
+    break_to_folder(spec.mesh, puzzle, params=BreakParams(pieces=spec.pieces), seed=spec.seed)
+    run_to_folder([puzzle / "fragments"], tmp_path / "out", seed=0)
+    s = _score(tmp_path / "out", puzzle)
+    assert s["solved"], s
+    assert s["rot_geodesic_rmse_deg"] < 0.5
+
+
+def test_run_outputs(run_dir, puzzle_dir):
+    import trimesh
+
+    names = sorted(p.stem for p in (puzzle_dir / "fragments").iterdir())
+    T = read_transforms(run_dir / "transforms.json")
+    assert sorted(T) == names
+    assert all(t["placed"] and 0.5 < t["confidence"] <= 1.0 for t in T.values())
+    # world = the largest placed fragment's file frame: one identity
+    assert sum(np.allclose(t["transform"], np.eye(4)) for t in T.values()) == 1
+    scene = trimesh.load(run_dir / "assembled.glb")
+    for n in names:
+        np.testing.assert_allclose(scene.graph.get(n)[0], T[n]["transform"], atol=1e-9)
+    ply = trimesh.load(run_dir / "assembled.ply", process=False)
+    mesh = sum(len(read_puzzle(puzzle_dir / "ground_truth.json", with_labels=False).meshes[n].faces) for n in names)
+    assert len(ply.faces) == mesh
+    report = json.loads((run_dir / "report.json").read_text())
+    assert report["summary"]["placed"] == len(names) and report["groups"] == [names]
+    contacts = {tuple(c["fragments"]) for c in report["contacts"]}
+    truth = json.loads((puzzle_dir / "ground_truth.json").read_text())
+    big = {tuple(sorted(c["fragments"])) for c in truth["contacts"] if c["area"] > 0.01 * truth["object"]["area"]}
+    assert big <= contacts  # every large true contact is reported
+    for c in report["contacts"]:
+        assert c["penetration_area"] <= 0.02 * c["contact_area"] + 1e-12
+    config = json.loads((run_dir / "config.json").read_text())
+    assert {"match", "segmentation", "registration", "assembly", "reference_size"} <= set(config)
+
+
+def test_run_recovers_a_moved_fragment(run_dir, puzzle_dir, tmp_path, rng):
+    """Moving one input file by a known rigid motion moves its result by exactly the inverse."""
+    import trimesh
+
+    frags = tmp_path / "fragments"
+    shutil.copytree(puzzle_dir / "fragments", frags)
+    name = sorted(p.stem for p in frags.iterdir())[1]
+    M = make_transform(random_rotation(rng), rng.normal(size=3))
+    mesh = trimesh.load(frags / f"{name}.ply", process=False)
+    mesh.apply_transform(M)
+    mesh.export(frags / f"{name}.ply")
+    run_to_folder([frags], tmp_path / "out", seed=0)
+    before = read_transforms(run_dir / "transforms.json")
+    after = read_transforms(tmp_path / "out" / "transforms.json")
+    anchor = next(n for n, t in before.items() if np.allclose(t["transform"], np.eye(4)))
+    assert anchor != name
+    expected = before[name]["transform"] @ invert_transform(M)
+    assert rotation_angle_deg(after[name]["transform"][:3, :3], expected[:3, :3]) < 0.2
+    assert np.linalg.norm(after[name]["transform"][:3, 3] - expected[:3, 3]) < 1e-3
+
+
+def test_stray_fragment_is_not_placed(puzzle_dir, tmp_path):
+    stray_puzzle = tmp_path / "torus"
+    break_to_folder("torus", stray_puzzle, params=BreakParams(pieces=3), seed=4)
+    frags = tmp_path / "fragments"
+    shutil.copytree(puzzle_dir / "fragments", frags)
+    shutil.copy(stray_puzzle / "fragments" / "fragment_00.ply", frags / "stray.ply")
+    report = run_to_folder([frags], tmp_path / "out", seed=0)
+    assert not report["fragments"]["stray"]["placed"]
+    assert report["fragments"]["stray"]["notes"]
+    T = read_transforms(tmp_path / "out" / "transforms.json")
+    assert not T["stray"]["placed"]
+    assert sum(t["placed"] for t in T.values()) == 4
+    # the cow pieces alone, scored against their truth: all four right
+    from reassemble.io import write_json
+
+    write_json(tmp_path / "cow.json", {"fragments": {n: {"transform": t["transform"].tolist(), "placed": True}
+                                                     for n, t in T.items() if n != "stray"}})
+    s = evaluate_files(tmp_path / "cow.json", puzzle_dir / "ground_truth.json")["alignments"]["anchor_largest"]
+    assert s["summary"]["solved"]
+
+
+def test_run_is_deterministic_and_independent_of_jobs(run_dir, puzzle_dir, tmp_path):
+    run_to_folder([puzzle_dir / "fragments"], tmp_path / "out", seed=0, jobs=2)
+    a, b = tree_digest(run_dir), tree_digest(tmp_path / "out")
+    assert sorted(a) == sorted(b)
+    for k in ("transforms.json", "report.json", "pairs.json", "assembled.glb", "assembled.ply"):
+        if k == "report.json":  # holds timings
+            ra, rb = json.loads(a[k]), json.loads(b[k])
+            ra["summary"].pop("timings_s"), rb["summary"].pop("timings_s")
+            assert ra == rb
+        else:
+            assert a[k] == b[k], k
+
+
+def test_run_refuses_existing_output_and_keeps_inputs(run_dir, puzzle_dir):
+    before = tree_digest(puzzle_dir)
+    with pytest.raises(ReassembleError, match="exists"):
+        run_to_folder([puzzle_dir / "fragments"], run_dir, seed=0)
+    assert tree_digest(puzzle_dir) == before
+
+
+def test_interrupted_run_leaves_nothing(puzzle_dir, tmp_path, monkeypatch):
+    import reassemble.assembly
+
+    def boom(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(reassemble.assembly, "assemble", boom)
+    with pytest.raises(KeyboardInterrupt):
+        run_to_folder([puzzle_dir / "fragments"], tmp_path / "out", seed=0)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_refine_recovers_perturbed_poses(puzzle):
+    meshes = {n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}
+    frags, size = prepare_fragments(meshes, seed=0)
+    truth = np.array([puzzle.ground_truth["fragments"][f.name]["transform"] for f in frags])
+    rng = np.random.default_rng(7)
+    noisy = truth.copy()
+    for k in range(1, len(frags)):
+        axis = rng.normal(size=3)
+        R = make_transform(_axis_angle(axis / np.linalg.norm(axis), np.radians(1.0)), rng.normal(size=3) * 0.003 * size)
+        centre = truth[k][:3, :3] @ frags[k].vertices.mean(axis=0) + truth[k][:3, 3]
+        about = make_transform(np.eye(3), centre) @ R @ make_transform(np.eye(3), -centre)
+        noisy[k] = about @ truth[k]
+    out = refine(noisy, [f.surface for f in frags], tol=0.006 * size, anchor=0)
+    assert not np.shares_memory(out, noisy)
+    for k in range(1, len(frags)):
+        assert rotation_angle_deg(out[k][:3, :3], truth[k][:3, :3]) < 0.1
+        c = frags[k].vertices.mean(axis=0)
+        assert np.linalg.norm(out[k][:3, :3] @ c + out[k][:3, 3] - truth[k][:3, :3] @ c - truth[k][:3, 3]) < 1e-3 * size
+
+
+def _axis_angle(axis, angle):
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def test_world_poses_put_unplaced_groups_apart():
+    from reassemble.features import FractureSurface
+
+    rng = np.random.default_rng(0)
+    cube = rng.random((200, 3))
+    empty = np.zeros((0, 3))
+    surfs = [FractureSurface(empty, empty, np.zeros((0, 2)), empty, empty, 0.0, cube, 0.01, 0.0, 1.0)
+             for _ in range(4)]
+    shift = make_transform(np.eye(3), [0.5, 0, 0])
+    A = Assembly(np.array([np.eye(4), shift, np.eye(4), np.eye(4)]), np.array([0, 0, 1, 2]),
+                 np.array([True, True, False, False]), np.zeros(4))
+    T = world_poses(A, surfs, gap=0.1)
+    np.testing.assert_allclose(T[:2], A.T_group_fragment[:2])
+    boxes = [(cube @ t[:3, :3].T + t[:3, 3]) for t in T]
+    main_hi = max(boxes[0][:, 0].max(), boxes[1][:, 0].max())
+    assert boxes[2][:, 0].min() >= main_hi + 0.1 - 1e-9
+    assert boxes[3][:, 0].min() >= boxes[2][:, 0].max() + 0.1 - 1e-9

@@ -221,21 +221,60 @@ def reference_size(meshes: list[tuple[np.ndarray, np.ndarray]]) -> float:
     return float(np.median([np.linalg.norm(np.ptp(v, axis=0)) for v, _ in meshes]))
 
 
+_WORKER: dict = {}  # what a worker process holds between tasks (set by an initializer)
+
+
+def _describe(task):
+    """(Descriptors or None, note) of one fragment; a failure is a note, not fatal."""
+    from .descriptors import integral_invariants
+
+    v, f, radii, params, largest = task
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    if diag <= radii.max():
+        return None, (f"not matched: too small (bounding-box diagonal {diag:.4g}, below the largest "
+                      f"descriptor radius {radii.max():.4g} = {largest:g} x the median fragment)")
+    try:
+        return integral_invariants(v, f, radii, points=v[f].mean(axis=1), params=params), ""
+    except ReassembleError as exc:  # e.g. a grid over the memory budget: the others go on
+        return None, f"not matched: {exc}"
+
+
+def _map(fn, tasks, *, jobs: int, initializer=None, initargs=()):
+    """``map(fn, tasks)`` in order, in ``jobs`` processes when jobs > 1 (spawned, not forked:
+    the parent holds Open3D and FFT thread pools)."""
+    if jobs <= 1 or len(tasks) <= 1:
+        if initializer is not None:
+            initializer(*initargs)
+        try:
+            yield from map(fn, tasks)
+        finally:
+            _WORKER.clear()
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context("spawn"),
+                             initializer=initializer, initargs=initargs) as pool:
+        yield from pool.map(fn, tasks, chunksize=max(1, len(tasks) // (8 * jobs)))
+
+
 def prepare_fragments(
     meshes: dict[str, tuple[np.ndarray, np.ndarray]],
     *,
     config: MatchConfig = MatchConfig(),
     segment_params=None,
     seed: int = 0,
+    jobs: int = 1,
     progress: bool = False,
 ) -> tuple[list[PreparedFragment], float]:
     """Descriptors at the face centres, segmentation over the whole set, fracture features.
 
+    ``jobs`` > 1 computes the descriptors of that many fragments at once, in processes.
     Returns the prepared fragments (in sorted name order) and the reference size.
     """
     from tqdm import tqdm
 
-    from .descriptors import DescriptorParams, integral_invariants
+    from .descriptors import DescriptorParams
     from .features import empty_surface, fracture_surface
     from .segmentation import SegmentParams, Segmentation, segment
 
@@ -244,19 +283,13 @@ def prepare_fragments(
     size = reference_size(pairs)
     radii = size * np.asarray(config.radii)
     params = DescriptorParams(with_d2=False, principal=True)
+    tasks = [(v, f, radii, params, config.radii[-1]) for v, f in pairs]
     descriptors, notes = [], {}
-    for name, (v, f) in tqdm(list(zip(names, pairs)), desc="descriptors", disable=not progress):
-        diag = float(np.linalg.norm(np.ptp(v, axis=0)))
-        if diag <= radii.max():
-            notes[name] = (f"not matched: too small (bounding-box diagonal {diag:.4g}, below the largest "
-                           f"descriptor radius {radii.max():.4g} = {config.radii[-1]:g} x the median fragment)")
-            descriptors.append(None)
-            continue
-        try:
-            descriptors.append(integral_invariants(v, f, radii, points=v[f].mean(axis=1), params=params))
-        except ReassembleError as exc:  # e.g. a grid over the memory budget: the others go on
-            notes[name] = f"not matched: {exc}"
-            descriptors.append(None)
+    for name, (d, note) in zip(names, tqdm(_map(_describe, tasks, jobs=jobs), total=len(tasks), desc="descriptors",
+                                           disable=not progress)):
+        descriptors.append(d)
+        if note:
+            notes[name] = note
     good = [k for k, d in enumerate(descriptors) if d is not None]
     segs = [None] * len(names)
     if good:
@@ -279,9 +312,6 @@ def prepare_fragments(
                 log.warning("%s: %s", name, notes[name])
         out.append(PreparedFragment(name, v, f, d, s, surf, notes.get(name, "")))
     return out, size
-
-
-_WORKER: dict = {}
 
 
 def _pair_worker_init(surfaces, meshes, size, params) -> None:
@@ -327,28 +357,10 @@ def match_pairs(
     rngs = np.random.default_rng(seed).spawn(len(pairs))
     tasks = [(i, j, rng) for (i, j), rng in zip(pairs, rngs)]
     init = ([f.surface for f in fragments], [(f.vertices, f.faces) for f in fragments], size, params)
-    bar = tqdm(total=len(tasks), desc="pairs", disable=not progress)
     results = {}
-    if jobs > 1 and len(tasks) > 1:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        # spawn, not fork: the parent holds Open3D and FFT thread pools
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=_pair_worker_init, initargs=init) as pool:
-            for key, res in pool.map(_pair_worker, tasks, chunksize=max(1, len(tasks) // (8 * jobs))):
-                results[key] = res
-                bar.update()
-    else:
-        _pair_worker_init(*init)
-        try:
-            for task in tasks:
-                key, res = _pair_worker(task)
-                results[key] = res
-                bar.update()
-        finally:
-            _WORKER.clear()
-    bar.close()
+    for key, res in tqdm(_map(_pair_worker, tasks, jobs=jobs, initializer=_pair_worker_init, initargs=init),
+                         total=len(tasks), desc="pairs", disable=not progress):
+        results[key] = res
     return results
 
 
@@ -467,7 +479,8 @@ def match_to_folder(
         raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
     meshes, warnings = load_fragments(inputs)
     seg_params, reg_params = SegmentParams(), RegistrationParams()
-    frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, progress=progress)
+    frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,
+                                     progress=progress)
     results = match_pairs(frags, size=size, params=reg_params, seed=seed, jobs=jobs, progress=progress)
     pairs = _pairs_json(frags, results)
     with staged_directory(out, force=force) as tmp:
@@ -522,7 +535,8 @@ def run_to_folder(
     meshes, warnings = load_fragments(inputs)
     seg_params, reg_params = SegmentParams(), RegistrationParams()
     assembly_params = assembly_params or AssemblyParams()
-    frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, progress=progress)
+    frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,
+                                     progress=progress)
     t1 = time.perf_counter()
     results = match_pairs(frags, size=size, params=reg_params, seed=seed, jobs=jobs, progress=progress)
     t2 = time.perf_counter()

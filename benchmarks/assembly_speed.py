@@ -1,0 +1,69 @@
+"""End-to-end time of `reassemble run` against fragment count and mesh size.
+
+    python benchmarks/assembly_speed.py                       # spot, 10 and 20 pieces, ~10k faces each, --jobs 2
+    python benchmarks/assembly_speed.py --pieces 5,10,20 --cut-edge 0.004 --jobs 2
+
+Breaks a bundled mesh (`reassemble break`, cut-surface edge length --cut-edge of the
+diagonal: 0.0055 gives ~10k faces per fragment at 10 pieces of the cow), then times the
+real command line, `python -m reassemble run FRAGMENTS --out DIR --jobs J --quiet`, from
+process start to written files (imports and worker start-up included), and scores it.
+Run it on an idle machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import header  # noqa: E402
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--mesh", default="spot")
+    parser.add_argument("--pieces", default="10,20")
+    parser.add_argument("--cut-edge", type=float, default=0.0055)
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    header()
+    from reassemble.pipeline import break_to_folder, evaluate_files, read_puzzle
+    from reassemble.synth import BreakParams
+
+    print(f"{'puzzle':<24s} {'faces/frag':>10s} {'run s':>7s} {'prepare':>8s} {'pairs':>6s} {'assembly':>8s} "
+          f"{'placed':>6s} {'strict':>6s} {'solved':>6s}")
+    for n in (int(p) for p in args.pieces.split(",")):
+        with tempfile.TemporaryDirectory() as tmp:
+            puzzle = Path(tmp) / "puzzle"
+            break_to_folder(args.mesh, puzzle, params=BreakParams(pieces=n, cut_edge=args.cut_edge), seed=args.seed)
+            faces = np.mean([len(m.faces) for m in read_puzzle(puzzle / "ground_truth.json",
+                                                               with_labels=False).meshes.values()])
+            t = time.perf_counter()
+            proc = subprocess.run([sys.executable, "-m", "reassemble", "run", str(puzzle / "fragments"), "--out",
+                                   str(Path(tmp) / "out"), "--jobs", str(args.jobs), "--quiet",
+                                   "--seed", str(args.seed)], capture_output=True, text=True)
+            elapsed = time.perf_counter() - t
+            if proc.returncode:
+                print(proc.stderr)
+                return 1
+            report = json.loads((Path(tmp) / "out" / "report.json").read_text())
+            s = evaluate_files(Path(tmp) / "out" / "transforms.json", puzzle / "ground_truth.json")
+            s = s["alignments"]["anchor_largest"]["summary"]
+            t_ = report["summary"]["timings_s"]
+            print(f"{args.mesh + f'_{n:02d}p_s{args.seed}':<24s} {faces:>10.0f} {elapsed:>7.1f} {t_['prepare']:>8.1f} "
+                  f"{t_['pairs']:>6.1f} {t_['assembly']:>8.1f} {report['summary']['placed']:>6d} "
+                  f"{s['part_acc_strict']:>6.3f} {str(s['solved']):>6s}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -77,7 +77,7 @@ def report_puzzle(r: dict) -> None:
 
 
 def summarize(label: str, rs: list[dict]) -> None:
-    def block(key, errs_key):
+    def block(key, errs_key, rs=rs):
         strict = np.mean([r[key]["part_acc_strict"] for r in rs])
         bb = np.mean([r[key]["part_acc"] for r in rs])
         rot = np.mean([r[key]["rot_geodesic_rmse_deg"] for r in rs])
@@ -87,9 +87,11 @@ def summarize(label: str, rs: list[dict]) -> None:
                 f"(mean over puzzles; over all fragments {np.sqrt(np.mean(errs ** 2)):.2f}, median "
                 f"{np.median(errs):.3f}), solved {solved:.3f}")
 
-    print(f"{label:>6s} ({len(rs)} puzzles) ours: {block('ours', 'rot_errors')}")
-    if all("base" in r for r in rs):
-        print(f"{'':>6s} {'':>{len(str(len(rs))) + 10}s} fpfh: {block('base', 'base_rot_errors')}")
+    print(f"{label} ({len(rs)} puzzles) ours: {block('ours', 'rot_errors')}")
+    with_base = [r for r in rs if "base" in r]
+    if with_base:
+        print(f"{label} ({len(with_base)} puzzles with the baseline) ours: {block('ours', 'rot_errors', with_base)}")
+        print(f"{label} ({len(with_base)} puzzles with the baseline) fpfh: {block('base', 'base_rot_errors', with_base)}")
 
 
 def main() -> int:
@@ -101,6 +103,9 @@ def main() -> int:
     parser.add_argument("--clean-only", action="store_true")
     parser.add_argument("--noisy-only", action="store_true")
     parser.add_argument("--no-baseline", action="store_true")
+    parser.add_argument("--baseline-max-pieces", type=int, default=12,
+                        help="run the baseline on puzzles of at most this many pieces (default 12: it takes "
+                        "about 300 s on a 20-piece puzzle)")
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once (each in one process)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
@@ -127,7 +132,8 @@ def main() -> int:
     t0 = time.perf_counter()
     results = []
     with ProcessPoolExecutor(args.jobs) as pool:
-        for r in pool.map(run_puzzle, paths, [not args.no_baseline] * len(paths), [args.seed] * len(paths)):
+        baseline = [not args.no_baseline and s.pieces <= args.baseline_max_pieces for s in specs]
+        for r in pool.map(run_puzzle, paths, baseline, [args.seed] * len(paths)):
             results.append(r)
             report_puzzle(r)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")
@@ -137,6 +143,11 @@ def main() -> int:
     for label, rs in groups.items():
         if rs:
             summarize(label, rs)
+    for label, rs in groups.items():
+        for cap in (8, 12):
+            small = [r for r in rs if r["fragments"] <= cap]
+            if small and len(small) < len(rs):
+                summarize(f"{label} <= {cap} pieces", small)
     print("\ntime of `run` (one process) against fragment count, mean over puzzles:")
     by_n: dict[int, list] = {}
     for r in results:

@@ -173,6 +173,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     _print_run(report, args.out / "result")
     print(f"against the ground truth ({args.out}/result/score.json):")
     print(_format_report(score))
+    print("(reassemble's world frame is the largest placed fragment's file frame, not the puzzle's: "
+          "the anchored columns are the ones that count)")
     return 0
 
 

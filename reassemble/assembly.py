@@ -345,6 +345,7 @@ def refine(
     iterations: int = 15,
     anchor: int = 0,
     levels: tuple[float, ...] = (2.0, 1.0),
+    n_points: int = 1500,
 ) -> np.ndarray:
     """Joint point-to-plane refinement of the poses of one sub-assembly.
 
@@ -360,6 +361,7 @@ def refine(
     normal_angle : degrees from exactly opposed normals still counted
     iterations : per level
     anchor : index of the fragment that stays fixed
+    n_points : fracture samples per fragment used (the first: they are in random order)
 
     Returns
     -------
@@ -377,18 +379,20 @@ def refine(
         pairs = [(p, q) for p in range(m) for q in range(m) if p != q and len(surfaces[p].samples)
                  and len(surfaces[q].samples) and _near(T[p], T[q], p, q, centres, radii, distance)]
         for _ in range(iterations):
-            pts = [transform_points(T[k], s.samples) for k, s in enumerate(surfaces)]
-            nrm = [s.sample_normals @ T[k][:3, :3].T for k, s in enumerate(surfaces)]
+            pts = [transform_points(T[k], s.samples[:n_points]) for k, s in enumerate(surfaces)]
+            nrm = [s.sample_normals[:n_points] @ T[k][:3, :3].T for k, s in enumerate(surfaces)]
             trees = {q: cKDTree(pts[q]) for q in {q for _, q in pairs}}
             AtA = np.zeros((6 * len(free), 6 * len(free)))
             Atb = np.zeros(6 * len(free))
             rows = 0
+            touching = []
             for p, q in pairs:
                 d, j = trees[q].query(pts[p], distance_upper_bound=distance)
                 ok = np.isfinite(d)
                 ok[ok] = np.einsum("ij,ij->i", nrm[p][ok], nrm[q][j[ok]]) < -cos_tol
                 if not ok.any():
                     continue
+                touching.append((p, q))
                 P, Q, N = pts[p][ok], pts[q][j[ok]], nrm[q][j[ok]]
                 r = np.einsum("ij,ij->i", P - Q, N)
                 blocks = []
@@ -410,6 +414,7 @@ def refine(
                 step[:3, :3] = _rotation(x[c:c + 3])
                 step[:3, 3] = x[c + 3:c + 6]
                 T[k] = step @ T[k]
+            pairs = touching  # the motions are small: pairs apart now stay apart in this level
             if np.abs(x).max() < 1e-7 * max(tol, 1e-300):
                 break
     return T

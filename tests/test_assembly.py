@@ -182,3 +182,24 @@ def test_world_poses_put_unplaced_groups_apart():
     main_hi = max(boxes[0][:, 0].max(), boxes[1][:, 0].max())
     assert boxes[2][:, 0].min() >= main_hi + 0.1 - 1e-9
     assert boxes[3][:, 0].min() >= boxes[2][:, 0].max() + 0.1 - 1e-9
+
+
+def test_missing_fragment_others_still_right(tmp_path):
+    puzzle = tmp_path / "puzzle"
+    break_to_folder("torus", puzzle, params=BreakParams(pieces=5), seed=2)
+    frags = tmp_path / "fragments"
+    frags.mkdir()
+    names = sorted(p.stem for p in (puzzle / "fragments").iterdir())
+    for n in names[1:]:  # one fragment lost
+        shutil.copy(puzzle / "fragments" / f"{n}.ply", frags)
+    run_to_folder([frags], tmp_path / "out", seed=0)
+    T = read_transforms(tmp_path / "out" / "transforms.json")
+    truth = read_transforms(puzzle / "ground_truth.json")
+    assert sorted(T) == names[1:] and all(t["placed"] for t in T.values())
+    diag = json.loads((puzzle / "ground_truth.json").read_text())["object"]["diagonal"]
+    ref = names[1]
+    for n in names[2:]:
+        got = invert_transform(T[ref]["transform"]) @ T[n]["transform"]
+        want = invert_transform(truth[ref]["transform"]) @ truth[n]["transform"]
+        assert rotation_angle_deg(got[:3, :3], want[:3, :3]) < 0.5
+        assert np.linalg.norm(got[:3, 3] - want[:3, 3]) < 0.005 * diag

@@ -83,8 +83,11 @@ def test_run_recovers_a_moved_fragment(run_dir, puzzle_dir, tmp_path, rng):
     anchor = next(n for n, t in before.items() if np.allclose(t["transform"], np.eye(4)))
     assert anchor != name
     expected = before[name]["transform"] @ invert_transform(M)
+    # not bit-identical: the descriptor grids are axis-aligned, so a moved input samples
+    # differently; 0.2 % of the diagonal is 5x tighter than strict part accuracy
+    diag = json.loads((puzzle_dir / "ground_truth.json").read_text())["object"]["diagonal"]
     assert rotation_angle_deg(after[name]["transform"][:3, :3], expected[:3, :3]) < 0.2
-    assert np.linalg.norm(after[name]["transform"][:3, 3] - expected[:3, 3]) < 1e-3
+    assert np.linalg.norm(after[name]["transform"][:3, 3] - expected[:3, 3]) < 2e-3 * diag
 
 
 def test_stray_fragment_is_not_placed(puzzle_dir, tmp_path):

@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import header  # noqa: E402
+from benchmarks.common import add_selection, header, select  # noqa: E402
 
 ALIGN = "anchor_largest"
 
@@ -96,32 +96,14 @@ def summarize(label: str, rs: list[dict]) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("root", type=Path, help="bench set folder (built if missing)")
-    parser.add_argument("--pieces", default="2,4,8,12,20")
-    parser.add_argument("--seeds", default="0")
-    parser.add_argument("--meshes", default=None, help="comma-separated subset of the bench meshes")
-    parser.add_argument("--clean-only", action="store_true")
-    parser.add_argument("--noisy-only", action="store_true")
+    add_selection(parser, pieces="2,4,8,12,20")
     parser.add_argument("--no-baseline", action="store_true")
     parser.add_argument("--baseline-max-pieces", type=int, default=12,
                         help="run the baseline on puzzles of at most this many pieces (default 12: it takes "
                         "about 300 s on a 20-piece puzzle)")
-    parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once (each in one process)")
-    parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     header()
-    from data_synth.make_sets import build_set
-    from data_synth.sets import bench_set
-
-    if not (args.root / "index.json").is_file():
-        print(f"building the bench set in {args.root} ...", flush=True)
-        build_set("bench", args.root, jobs=max(1, args.jobs))
-    pieces = {int(p) for p in args.pieces.split(",")}
-    seeds = {int(s) for s in args.seeds.split(",")}
-    meshes = set(args.meshes.split(",")) if args.meshes else None
-    specs = [s for s in bench_set() if s.pieces in pieces and s.seed in seeds
-             and (meshes is None or s.mesh in meshes) and not (args.clean_only and s.noise)
-             and not (args.noisy_only and not s.noise)]
+    specs = select(args)
     # the biggest first, so the pool is not left waiting on one 20-piece puzzle at the end
     specs.sort(key=lambda s: -s.pieces)
     paths = [str(args.root / s.name / "ground_truth.json") for s in specs]

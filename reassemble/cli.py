@@ -260,11 +260,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_common(p) -> None:
+def _add_common(p, *, seed: int = 0) -> None:
     p.add_argument("--force", action="store_true", help="replace an existing output folder")
-    p.add_argument("--seed", type=_int_at_least(0), default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=_int_at_least(0), default=seed, help=f"random seed (default {seed})")
     p.add_argument("--jobs", type=_int_at_least(0), default=0,
-                   help="processes for the pairwise registration (default 0: one per available core)")
+                   help="processes for descriptors and pairwise registration (default 0: one per available core)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -294,8 +294,8 @@ def _add_run(sub) -> None:
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
     p.add_argument("--mesh", default="spot", help="bundled mesh name or a closed mesh file (default spot)")
     p.add_argument("--pieces", type=_int_at_least(2), default=8, help="number of fragments (default 8)")
-    _add_common(p)
-    p.set_defaults(func=_cmd_demo, seed=1)
+    _add_common(p, seed=1)
+    p.set_defaults(func=_cmd_demo)
 
 
 def _add_match(sub) -> None:

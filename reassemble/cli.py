@@ -268,6 +268,16 @@ def _add_common(p, *, seed: int = 0) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
+def _add_inputs(p) -> None:
+    """Fragments in, a folder out: the arguments of match and run."""
+    p.add_argument("inputs", nargs="+", help="fragment mesh files (.ply .obj .stl .off .glb .gltf), or folders of them")
+    p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
+    p.add_argument("--debug-files", action="store_true",
+                   help="also write fracture labels as vertex colours (labels/*.ply) and matched keypoints per "
+                   "pair (matches/)")
+    _add_common(p)
+
+
 def _add_run(sub) -> None:
     p = sub.add_parser(
         "run",
@@ -277,11 +287,7 @@ def _add_run(sub) -> None:
         "confidence per file stem), assembled.glb (one node per fragment), assembled.ply (placed "
         "fragments), report.json, pairs.json and config.json. The folder appears only when complete.",
     )
-    p.add_argument("inputs", nargs="+", help="fragment mesh files (.ply .obj .stl .off .glb .gltf), or folders of them")
-    p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
-    p.add_argument("--debug-files", action="store_true",
-                   help="also write fracture labels (labels/*.ply) and matched keypoints per pair (matches/)")
-    _add_common(p)
+    _add_inputs(p)
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser(
@@ -306,11 +312,7 @@ def _add_match(sub) -> None:
         "pair along the fracture surfaces. Writes pairs.json (ranked candidate transforms "
         "T_target_source with contact and penetration), fragments.json and config.json.",
     )
-    p.add_argument("inputs", nargs="+", help="fragment mesh files, or folders of them")
-    p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
-    p.add_argument("--debug-files", action="store_true",
-                   help="also write fracture labels as vertex colours (labels/*.ply) and matched keypoints per pair")
-    _add_common(p)
+    _add_inputs(p)
     p.set_defaults(func=_cmd_match)
 
 

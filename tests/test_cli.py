@@ -163,17 +163,18 @@ def test_match_writes_pairs_and_debug_files(puzzle_dir, tmp_path):
     assert before == {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in frag_dir.iterdir()}
 
 
-def test_match_bad_input(tmp_path):
+@pytest.mark.parametrize("command", ["match", "run"])
+def test_folder_commands_bad_input(tmp_path, command):
     empty = tmp_path / "empty"
     empty.mkdir()
-    rc, _, err = run("match", empty, "--out", tmp_path / "o")
+    rc, _, err = run(command, empty, "--out", tmp_path / "o")
     assert_one_line_error(rc, err, "no mesh files")
-    rc, _, err = run("match", tmp_path / "missing", "--out", tmp_path / "o")
+    rc, _, err = run(command, tmp_path / "missing", "--out", tmp_path / "o")
     assert_one_line_error(rc, err, "no such file")
     one = tmp_path / "one"
     one.mkdir()
     trimesh.creation.box().export(one / "a.ply")
-    rc, _, err = run("match", one, "--out", tmp_path / "o")
+    rc, _, err = run(command, one, "--out", tmp_path / "o")
     assert_one_line_error(rc, err, "at least two")
     assert not (tmp_path / "o").exists()
 
@@ -195,13 +196,7 @@ def test_run_and_demo(puzzle_dir, tmp_path):
     assert_one_line_error(rc, err, "exists", "--force")
 
 
-def test_run_bad_input(tmp_path):
-    empty = tmp_path / "empty"
-    empty.mkdir()
-    rc, _, err = run("run", empty, "--out", tmp_path / "o")
-    assert_one_line_error(rc, err, "no mesh files")
-    rc, _, err = run("run", tmp_path / "missing", "--out", tmp_path / "o")
-    assert_one_line_error(rc, err, "no such file")
+def test_run_bad_file_among_too_few(tmp_path):
     one = tmp_path / "one"
     one.mkdir()
     trimesh.creation.box().export(one / "a.ply")

@@ -24,8 +24,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .features import FractureSurface
-from .geometry import invert_transform, transform_points
-from .registration import RegistrationParams, contact_score
+from .geometry import farthest_points, invert_transform, make_scene, transform_points
+from .registration import RegistrationParams, contact_score, touching_samples
 
 
 @dataclass(frozen=True)
@@ -246,7 +246,6 @@ def assemble(
     -------
     Assembly
     """
-    from .geometry import make_scene
     from .registration import register_pair
 
     n = len(surfaces)
@@ -422,6 +421,37 @@ def refine(
 
 
 
+def contact_points(
+    assembly: Assembly,
+    surfaces: list[FractureSurface],
+    meshes: list[tuple[np.ndarray, np.ndarray]],
+    *,
+    tol: float,
+    normal_angle: float = 30.0,
+    count: int = 40,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Where each contact of the assembly touches: point pairs for pictures and reports.
+
+    Returns
+    -------
+    One (points_a, points_b) per ``assembly.contacts`` entry: up to ``count`` (k, 3) touching
+    fracture samples of fragment ``a`` spread over the contact (a's coordinates) and the
+    closest points of ``b`` to them (b's coordinates).
+    """
+    out = []
+    scenes = {}
+    for c in assembly.contacts:
+        if c.b not in scenes:
+            scenes[c.b] = make_scene(*meshes[c.b])
+        T_b_a = invert_transform(assembly.T_group_fragment[c.b]) @ assembly.T_group_fragment[c.a]
+        touching, closest = touching_samples(surfaces[c.a], surfaces[c.b], T_b_a, target_scene=scenes[c.b], tol=tol,
+                                             normal_angle=normal_angle)
+        points_a = surfaces[c.a].samples[touching]
+        keep = farthest_points(points_a, count)
+        out.append((points_a[keep], closest[keep]))
+    return out
+
+
 def world_poses(assembly: Assembly, surfaces: list[FractureSurface], *, gap: float) -> np.ndarray:
     """``T_world_fragment`` for every fragment: group 0 where it is (the world frame is its
     largest fragment's), every other sub-assembly and lone fragment moved beside it along
@@ -451,4 +481,6 @@ def world_poses(assembly: Assembly, surfaces: list[FractureSurface], *, gap: flo
     return T
 
 
-__all__ = ["Assembly", "AssemblyParams", "Contact", "assemble", "group_surface", "refine", "world_poses"]
+__all__ = [
+    "Assembly", "AssemblyParams", "Contact", "assemble", "contact_points", "group_surface", "refine", "world_poses",
+]

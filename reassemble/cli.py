@@ -162,6 +162,23 @@ def _cmd_run(args: argparse.Namespace) -> int:
     report = run_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
                            jobs=_jobs(args), progress=not args.quiet)
     _print_run(report, args.out)
+    if args.render or args.viewer:
+        _view(args.out, render=args.render, viewer=args.viewer, progress=not args.quiet)
+    return 0
+
+
+def _view(folder: Path, *, progress: bool, **options) -> None:
+    from .pipeline import view_folder
+
+    summary = view_folder(folder, progress=progress, **options)
+    if summary["pictures"]:
+        print(f"wrote {summary['pictures']} pictures to {folder}/pictures/")
+    print(f"wrote {summary['report']} (open it in a browser; it needs no network)")
+
+
+def _cmd_view(args: argparse.Namespace) -> int:
+    _view(args.folder, truth=args.truth, radius=args.radius, render=not args.no_pictures, viewer=args.viewer,
+          width=args.size[0], height=args.size[1], progress=not args.quiet)
     return 0
 
 
@@ -175,7 +192,19 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(_format_report(score))
     print("(reassemble's world frame is the largest placed fragment's file frame, not the puzzle's: "
           "the anchored columns are the ones that count)")
+    if not args.no_render:
+        _view(args.out / "result", progress=not args.quiet)
     return 0
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not WIDTHxHEIGHT: {text!r}") from None
+    if not (64 <= w <= 4096 and 64 <= h <= 4096):
+        raise argparse.ArgumentTypeError(f"each side between 64 and 4096 pixels (got {text})")
+    return w, h
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -288,18 +317,43 @@ def _add_run(sub) -> None:
         "fragments), report.json, pairs.json and config.json. The folder appears only when complete.",
     )
     _add_inputs(p)
+    p.add_argument("--render", action="store_true",
+                   help="also write pictures and report.html (as 'reassemble view OUT' does)")
+    p.add_argument("--viewer", action="store_true", help="open an interactive 3D window at the end (needs a display)")
     p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser(
+        "view",
+        help="pictures and a shareable HTML report of a run",
+        description="Render headless pictures of a run folder (made by 'reassemble run'): every fragment "
+        "coloured by fracture / original surface and by mean curvature, every accepted match pulled apart "
+        "with lines between touching points and in contact, the assembly from six sides and exploded. "
+        "Writes FOLDER/pictures/ and FOLDER/report.html: one self-contained page (interactive 3D view, "
+        "pictures, tables) that opens from disk with no network. With no OpenGL the pictures are skipped "
+        "with a warning and the page is still written.",
+    )
+    p.add_argument("folder", type=Path, help="a run's output folder (with transforms.json)")
+    p.add_argument("--truth", type=Path, help="a puzzle's ground_truth.json: add the metrics to the report")
+    p.add_argument("--radius", type=_number,
+                   help="descriptor radius of the curvature pictures, a fraction of the reference size "
+                   "(one of the run's radii; default the middle one)")
+    p.add_argument("--size", type=_size, default=(640, 480), help="size of one view, WIDTHxHEIGHT (default 640x480)")
+    p.add_argument("--no-pictures", action="store_true", help="write report.html without rendering pictures")
+    p.add_argument("--viewer", action="store_true", help="open an interactive 3D window (needs a display)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_view)
 
     p = sub.add_parser(
         "demo",
         help="break a bundled mesh, reassemble it and score the result",
         description="The one-minute proof: breaks a bundled mesh into fragments in random poses "
-        "(OUT/puzzle), reassembles them with 'run' (OUT/result) and scores the result against the "
-        "ground truth (OUT/result/score.json).",
+        "(OUT/puzzle), reassembles them with 'run' (OUT/result), scores the result against the "
+        "ground truth (OUT/result/score.json) and writes the pictures and OUT/result/report.html.",
     )
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
     p.add_argument("--mesh", default="spot", help="bundled mesh name or a closed mesh file (default spot)")
     p.add_argument("--pieces", type=_int_at_least(2), default=8, help="number of fragments (default 8)")
+    p.add_argument("--no-render", action="store_true", help="skip the pictures and report.html")
     _add_common(p, seed=1)
     p.set_defaults(func=_cmd_demo)
 

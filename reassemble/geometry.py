@@ -117,6 +117,20 @@ def make_scene(vertices: np.ndarray, faces: np.ndarray):
     return scene
 
 
+def farthest_points(points: np.ndarray, count: int) -> np.ndarray:
+    """Indices of up to ``count`` points spread over ``points`` (n, 3): greedy farthest-point
+    order from the point nearest the centroid (deterministic)."""
+    n = len(points)
+    if n == 0:
+        return np.zeros(0, int)
+    chosen = [int(np.argmin(np.linalg.norm(points - points.mean(axis=0), axis=1)))]
+    dist = np.linalg.norm(points - points[chosen[0]], axis=1)
+    for _ in range(min(count, n) - 1):
+        chosen.append(int(np.argmax(dist)))
+        dist = np.minimum(dist, np.linalg.norm(points - points[chosen[-1]], axis=1))
+    return np.asarray(chosen)
+
+
 def sample_surface(
     vertices: np.ndarray, faces: np.ndarray, count: int, *, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:

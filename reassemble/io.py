@@ -332,3 +332,43 @@ def write_glb(
         scene.add_geometry(mesh, node_name=name, geom_name=name,
                            transform=np.asarray(T_world_fragment[name], dtype=np.float64))
     _atomic_write(Path(path), scene.export(file_type="glb"))
+
+
+def write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write bytes atomically (e.g. an encoded picture)."""
+    _atomic_write(Path(path), data)
+
+
+def write_text(path: str | os.PathLike, text: str) -> None:
+    """Write UTF-8 text atomically."""
+    _atomic_write(Path(path), text.encode("utf-8"))
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    """PNG encoding of an (h, w, 3) uint8 image (no timestamp: the same image, the same bytes)."""
+    import io as _io
+
+    from PIL import Image
+
+    buf = _io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8)).save(buf, format="PNG", optimize=True)
+    return buf.getvalue()
+
+
+def read_glb(path: str | os.PathLike) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The fragments of a scene written by :func:`write_glb`: name -> (vertices (n, 3),
+    faces (m, 3), T_world_fragment (4, 4)), in the file's node order."""
+    import trimesh
+
+    path = Path(path)
+    try:
+        scene = trimesh.load(path, file_type="glb", force="scene", process=False)
+    except Exception as exc:  # trimesh raises many types on a damaged file
+        raise ReassembleError(f"{path}: cannot read ({type(exc).__name__}: {exc})") from None
+    out = {}
+    for node in scene.graph.nodes_geometry:
+        T, geom = scene.graph[node]
+        mesh = scene.geometry[geom]
+        out[str(node)] = (np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64),
+                          np.asarray(T, np.float64))
+    return out

@@ -28,6 +28,7 @@ from .io import (
     write_npz,
     write_ply,
 )
+from .viz.colors import FRACTURE_RGB, ORIGINAL_RGB, fragment_colors
 
 log = logging.getLogger(__name__)
 
@@ -364,8 +365,6 @@ def match_pairs(
     return results
 
 
-FRACTURE_RGB = np.array([214, 69, 50], np.uint8)
-ORIGINAL_RGB = np.array([190, 190, 190], np.uint8)
 
 
 def load_fragments(inputs: list[str | Path]) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:
@@ -496,14 +495,6 @@ def match_to_folder(
             "warnings": warnings, "pair_list": pairs}
 
 
-def fragment_colors(n: int) -> np.ndarray:
-    """(n, 3) uint8 distinct colours (hues a golden angle apart), the same for the same n."""
-    import colorsys
-
-    return np.array([[round(255 * c) for c in colorsys.hsv_to_rgb((0.61803398875 * k) % 1.0, 0.55, 0.9)]
-                     for k in range(n)], dtype=np.uint8)
-
-
 TRANSFORMS_FORMAT = "reassemble-transforms/1"
 
 
@@ -518,13 +509,15 @@ def run_to_folder(
     ``T_world_fragment``, ``placed``, ``confidence``, ``group``), ``assembled.glb`` (one
     named node per fragment, its pose as the node transform), ``assembled.ply`` (the placed
     fragments in world coordinates, one colour each), ``report.json``, ``pairs.json``,
-    ``config.json``; with ``debug`` the files of :func:`match_to_folder`'s ``debug``.
+    ``config.json``, ``analysis.npz`` (what :func:`view_folder` draws: per-face fracture
+    labels and mean curvature, the touching points of every contact); with ``debug`` the
+    files of :func:`match_to_folder`'s ``debug``.
 
     Returns the report (a dict).
     """
     import time
 
-    from .assembly import AssemblyParams, assemble, world_poses
+    from .assembly import AssemblyParams, assemble, contact_points, world_poses
     from .registration import RegistrationParams
     from .segmentation import SegmentParams
 
@@ -546,6 +539,8 @@ def run_to_folder(
     A = assemble(surfaces, [(f.vertices, f.faces) for f in frags], results, size=size, params=assembly_params,
                  reg_params=reg_params, seed=seed)
     T_world = world_poses(A, surfaces, gap=0.1 * size)
+    touching = contact_points(A, surfaces, [(f.vertices, f.faces) for f in frags], tol=reg_params.tolerance * size,
+                              normal_angle=reg_params.normal_angle)
     t3 = time.perf_counter()
     timings.update(prepare=t1 - t0, pairs=t2 - t1, assembly=t3 - t2)
 
@@ -596,6 +591,7 @@ def run_to_folder(
         write_json(tmp / "report.json", report)
         write_json(tmp / "config.json", _resolved(seed, size, match=config, segmentation=seg_params,
                                                   registration=reg_params, assembly=assembly_params))
+        write_npz(tmp / "analysis.npz", **_analysis_arrays(frags, A.contacts, touching, size=size, config=config))
         write_glb(tmp / "assembled.glb", {f.name: (f.vertices, f.faces) for f in frags},
                   {n: T_world[k] for k, n in enumerate(names)}, colors=dict(zip(names, colors)))
         placed = np.flatnonzero(A.placed)
@@ -609,6 +605,158 @@ def run_to_folder(
             _write_debug(tmp, frags, results)
         write_json(tmp / "transforms.json", transforms)  # last: its presence means the run completed
     return report
+
+
+def _analysis_arrays(frags: list[PreparedFragment], contacts, touching, *, size: float, config: MatchConfig) -> dict:
+    """Arrays of ``analysis.npz``: ``names`` (n,), ``radii`` (r,) in mesh units and
+    ``radii_relative``; per fragment k ``fracture_k`` (faces,) int8 and, when it has
+    descriptors, ``H_k`` (faces, r) float32 mean curvature at the face centres; per contact i
+    (``contact_pairs`` (c, 2) fragment indices) ``contact_i_a`` / ``contact_i_b`` (p, 3)
+    touching points, each in its own fragment's coordinates."""
+    arrays = {"names": np.array([f.name for f in frags]), "radii": size * np.asarray(config.radii, float),
+              "radii_relative": np.asarray(config.radii, float),
+              "contact_pairs": np.array([[c.a, c.b] for c in contacts], np.int64).reshape(-1, 2)}
+    for k, f in enumerate(frags):
+        arrays[f"fracture_{k}"] = f.segmentation.fracture.astype(np.int8)
+        if f.descriptors is not None:
+            arrays[f"H_{k}"] = f.descriptors.H.astype(np.float32)
+    for i, (points_a, points_b) in enumerate(touching):
+        arrays[f"contact_{i}_a"], arrays[f"contact_{i}_b"] = points_a, points_b
+    return arrays
+
+
+VIEW_HINT = "`reassemble run FRAGMENTS --out {folder}` makes one"
+_PICTURE_FOLDERS = {"fragment": "fragments", "match": "matches"}
+
+
+def view_folder(
+    folder: str | Path, *, truth: str | Path | None = None, radius: float | None = None, render: bool = True,
+    viewer: bool = False, width: int = 640, height: int = 480, progress: bool = False,
+) -> dict:
+    """Pictures and ``report.html`` of a run folder (made by :func:`run_to_folder`).
+
+    Writes ``folder/pictures/`` (``assembly.png``: six sides; ``exploded.png``;
+    ``fragments/NAME.png``: fracture labels and mean curvature from both sides;
+    ``matches/A__B.png``: each accepted contact pulled apart with lines between touching
+    points, and in contact), replaced as a whole, and ``folder/report.html``: one
+    self-contained page (interactive 3D view, pictures, tables; with ``truth`` a
+    ``ground_truth.json``, or a ``score.json`` in the folder, the metrics). Where no OpenGL
+    context can be made the pictures are skipped with a warning and the page is still written.
+    ``radius``: the descriptor radius of the curvature pictures, as a fraction of the
+    reference size (one of the run's; default the middle one). ``viewer`` opens an
+    interactive window afterwards (needs a display).
+
+    Returns a summary: pictures written, the page's path, why pictures were skipped.
+    """
+    from tqdm import tqdm
+
+    from .io import read_glb, write_bytes, write_text
+    from .viz.report import report_html
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ReassembleError(f"{folder}: no such run folder ({VIEW_HINT.format(folder=folder)})")
+    if not (folder / "transforms.json").is_file():
+        raise ReassembleError(f"{folder}: no transforms.json here ({VIEW_HINT.format(folder=folder)})")
+    poses = read_transforms(folder / "transforms.json")
+    report = read_json(folder / "report.json", what="the run's report.json")
+    analysis_path = folder / "analysis.npz"
+    if not analysis_path.is_file():
+        raise ReassembleError(f"{analysis_path}: missing (made by `reassemble run` since 0.1; run it again)")
+    try:
+        with np.load(analysis_path, allow_pickle=False) as z:
+            analysis = {k: z[k] for k in z.files}
+    except (OSError, ValueError) as exc:
+        raise ReassembleError(f"{analysis_path}: cannot read ({exc})") from None
+    glb_path = folder / "assembled.glb"
+    scene = read_glb(glb_path)
+    names = [str(n) for n in analysis["names"]]
+    missing = [n for n in names if n not in scene or n not in poses]
+    if missing:
+        raise ReassembleError(f"{folder}: fragment {missing[0]!r} is in analysis.npz but not in assembled.glb "
+                              "or transforms.json (files of different runs?)")
+    meshes = [scene[n][:2] for n in names]
+    for k, (n, (_, f)) in enumerate(zip(names, meshes)):
+        if len(analysis[f"fracture_{k}"]) != len(f):
+            raise ReassembleError(f"{glb_path}: {n!r} has {len(f)} faces, analysis.npz {len(analysis[f'fracture_{k}'])}"
+                                  " (files of different runs?)")
+    relative = analysis["radii_relative"]
+    r_index = len(relative) // 2
+    if radius is not None:
+        close = np.flatnonzero(np.isclose(relative, radius, rtol=1e-6))
+        if len(close) == 0:
+            raise ReassembleError(f"--radius {radius:g}: not one of this run's descriptor radii "
+                                  f"({', '.join(f'{r:g}' for r in relative)}, fractions of the reference size)")
+        r_index = int(close[0])
+    if truth is not None:
+        metrics = evaluate_files(folder / "transforms.json", truth)
+    elif (folder / "score.json").is_file():
+        metrics = read_json(folder / "score.json", what="scores against a ground truth")
+    else:
+        metrics = None
+
+    colors = fragment_colors(len(names))
+    T_world = np.array([poses[n]["transform"] for n in names])
+    placed = np.array([poses[n]["placed"] for n in names])
+    pictures, notes, problem = {}, [], None
+    if render:
+        pictures, problem = _render_pictures(
+            meshes, T_world, placed=placed, colors=colors, analysis=analysis, names=names, r_index=r_index,
+            width=width, height=height, progress=progress, tqdm=tqdm)
+        if problem:
+            log.warning("%s: pictures skipped: %s", folder, problem)
+            notes.append(f"Pictures skipped: {problem}.")
+        else:
+            with staged_directory(folder / "pictures", force=True) as tmp:
+                for key, png in pictures.items():
+                    kind, _, name = key.partition("/")
+                    path = tmp / f"{kind}.png" if not name else tmp / _PICTURE_FOLDERS[kind] / f"{name}.png"
+                    path.parent.mkdir(exist_ok=True)
+                    write_bytes(path, png)
+    page = report_html(report, title=folder.resolve().name, colors=dict(zip(names, colors)),
+                       glb=glb_path.read_bytes(), pictures=pictures, metrics=metrics, notes=notes)
+    write_text(folder / "report.html", page)
+    if viewer:
+        from .viz.pictures import posed_shapes
+        from .viz.render import show_interactive
+
+        show_interactive(posed_shapes(meshes, T_world, colors=colors), title=f"reassemble: {folder.name}")
+    return {"pictures": len(pictures), "report": str(folder / "report.html"), "skipped": problem}
+
+
+def _render_pictures(meshes, T_world, *, placed, colors, analysis, names, r_index, width, height, progress, tqdm):
+    """(PNG bytes per picture key, None) or ({}, why no picture can be made)."""
+    from .io import png_bytes
+    from .viz.pictures import assembly_pictures, fragment_picture, match_picture
+    from .viz.render import Renderer, RenderUnavailable, gl_problem
+
+    problem = gl_problem()
+    if problem:
+        return {}, problem
+    radius = float(analysis["radii"][r_index])
+    H_title = f"H, 1/length\nr = {analysis['radii_relative'][r_index]:g} x size\n  = {radius:.3g}"
+    pairs = analysis["contact_pairs"]
+    out = {}
+    try:
+        with Renderer(width=width, height=height) as r:
+            views, exploded = assembly_pictures(r, meshes, T_world, placed=placed, colors=colors)
+            out["assembly"], out["exploded"] = png_bytes(views), png_bytes(exploded)
+            for k in tqdm(range(len(names)), desc="fragment pictures", disable=not progress):
+                H = analysis.get(f"H_{k}")
+                image = fragment_picture(r, *meshes[k], fracture=analysis[f"fracture_{k}"],
+                                         H=None if H is None else H[:, r_index], title=names[k], H_title=H_title)
+                out[f"fragment/{names[k]}"] = png_bytes(image)
+            for i in tqdm(range(len(pairs)), desc="match pictures", disable=not progress):
+                a, b = (int(x) for x in pairs[i])
+                image = match_picture(r, (meshes[a], meshes[b]), (T_world[a], T_world[b]),
+                                      points=(analysis[f"contact_{i}_a"], analysis[f"contact_{i}_b"]),
+                                      colors=(colors[a], colors[b]),
+                                      fracture=(analysis[f"fracture_{a}"], analysis[f"fracture_{b}"]),
+                                      title=f"{names[a]} + {names[b]}")
+                out[f"match/{names[a]}__{names[b]}"] = png_bytes(image)
+    except RenderUnavailable as exc:
+        return {}, str(exc)
+    return out, None
 
 
 def _largest(A, frags) -> int:

@@ -289,6 +289,50 @@ def _rotation(w: np.ndarray) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
+def _within(points: np.ndarray, surf: FractureSurface, tol: float) -> np.ndarray:
+    """(p,) bool: inside ``surf``'s bounding box grown by the tolerance and the sample spacing
+    (points outside can neither touch it nor be inside it)."""
+    margin = tol + 2.0 * np.sqrt(surf.surface_area)
+    lo, hi = surf.surface.min(axis=0) - margin, surf.surface.max(axis=0) + margin
+    return np.all((points >= lo) & (points <= hi), axis=1)
+
+
+def touching_samples(
+    source: FractureSurface,
+    target: FractureSurface,
+    T_target_source: np.ndarray,
+    *,
+    target_scene,
+    tol: float,
+    normal_angle: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which fracture samples of ``source`` touch ``target`` at a placement, and where.
+
+    A sample touches when it lies within ``tol`` of the target's surface and its normal
+    opposes the target's there (within ``normal_angle`` degrees).
+
+    Returns
+    -------
+    touching : (s,) bool over ``source.samples``
+    closest : (t, 3) the closest target points (target coordinates) of the t touching samples
+    """
+    import open3d as o3d
+
+    moved = transform_points(T_target_source, source.samples)
+    touching = np.zeros(len(moved), bool)
+    near = np.flatnonzero(_within(moved, target, tol))
+    if len(near) == 0:
+        return touching, np.zeros((0, 3))
+    closest = target_scene.compute_closest_points(o3d.core.Tensor(moved[near].astype(np.float32)))
+    points = closest["points"].numpy().astype(np.float64)
+    dist = np.linalg.norm(points - moved[near], axis=1)
+    turned = source.sample_normals[near] @ T_target_source[:3, :3].T
+    opposed = np.einsum("ij,ij->i", turned, closest["primitive_normals"].numpy()) < -np.cos(np.radians(normal_angle))
+    hit = (dist < tol) & opposed
+    touching[near[hit]] = True
+    return touching, points[hit]
+
+
 def contact_score(
     source: FractureSurface,
     target: FractureSurface,
@@ -304,33 +348,14 @@ def contact_score(
     Only points inside the other fragment's bounding box (grown by the tolerance and the
     sample spacing) are queried: the others can neither touch nor be inside it.
     """
-    import open3d as o3d
-
-    cos_tol = np.cos(np.radians(params.normal_angle))
-
-    def within(points, surf):
-        margin = tol + 2.0 * np.sqrt(surf.surface_area)
-        lo, hi = surf.surface.min(axis=0) - margin, surf.surface.max(axis=0) + margin
-        return np.all((points >= lo) & (points <= hi), axis=1)
-
-    def inside(scene, points):
-        return int(np.count_nonzero(scene.compute_signed_distance(
-            o3d.core.Tensor(points.astype(np.float32))).numpy() < -tol)) if len(points) else 0
-
-    moved = transform_points(T_target_source, source.samples)
-    near = within(moved, target)
-    contact = 0.0
-    if near.any():
-        closest = target_scene.compute_closest_points(o3d.core.Tensor(moved[near].astype(np.float32)))
-        dist = np.linalg.norm(closest["points"].numpy() - moved[near], axis=1)
-        turned = source.sample_normals[near] @ T_target_source[:3, :3].T
-        opposed = np.einsum("ij,ij->i", turned, closest["primitive_normals"].numpy()) < -cos_tol
-        contact = float(np.count_nonzero((dist < tol) & opposed)) * source.sample_area
+    touching, _ = touching_samples(source, target, T_target_source, target_scene=target_scene, tol=tol,
+                                   normal_angle=params.normal_angle)
+    contact = float(np.count_nonzero(touching)) * source.sample_area
     # penetration both ways: whole-surface samples deeper than the tolerance inside the other
     s_in_t = transform_points(T_target_source, source.surface)
     t_in_s = transform_points(invert_transform(T_target_source), target.surface)
-    penetration = (inside(target_scene, s_in_t[within(s_in_t, target)]) * source.surface_area
-                   + inside(source_scene, t_in_s[within(t_in_s, source)]) * target.surface_area)
+    penetration = (_inside(target_scene, s_in_t[_within(s_in_t, target, tol)], tol) * source.surface_area
+                   + _inside(source_scene, t_in_s[_within(t_in_s, source, tol)], tol) * target.surface_area)
     smaller = min(source.area, target.area)
     return (contact - params.penetration_weight * penetration) / smaller, contact, penetration
 
@@ -339,6 +364,8 @@ def _inside(scene, points: np.ndarray, tol: float) -> int:
     """How many points lie deeper than ``tol`` inside the scene's closed mesh."""
     import open3d as o3d
 
+    if len(points) == 0:
+        return 0
     return int(np.count_nonzero(scene.compute_signed_distance(o3d.core.Tensor(points.astype(np.float32))).numpy() < -tol))
 
 
@@ -418,5 +445,5 @@ def register_pair(
 
 __all__ = [
     "Candidate", "PairResult", "RegistrationParams", "contact_score", "correspondences", "icp",
-    "kabsch", "ransac", "register_pair",
+    "kabsch", "ransac", "register_pair", "touching_samples",
 ]

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from reassemble.pipeline import break_to_folder, read_puzzle
+from reassemble.pipeline import break_to_folder, read_puzzle, run_to_folder
 from reassemble.synth import BreakParams
 
 
@@ -10,6 +10,14 @@ def puzzle_dir(tmp_path_factory):
     """A 4-piece rough-cut puzzle of the low-resolution cow, built once per session."""
     out = tmp_path_factory.mktemp("puzzles") / "spot4"
     break_to_folder("spot_low_resolution", out, params=BreakParams(pieces=4), seed=1)
+    return out
+
+
+@pytest.fixture(scope="session")
+def run_dir(puzzle_dir, tmp_path_factory):
+    """`reassemble run` on the 4-piece cow, once per session (tests copy it before changing it)."""
+    out = tmp_path_factory.mktemp("run") / "out"
+    run_to_folder([puzzle_dir / "fragments"], out, seed=0)
     return out
 
 

@@ -22,13 +22,6 @@ def _score(run_dir, puzzle_dir) -> dict:
     return report["alignments"]["anchor_largest"]["summary"]
 
 
-@pytest.fixture(scope="module")
-def run_dir(puzzle_dir, tmp_path_factory):
-    out = tmp_path_factory.mktemp("run") / "out"
-    run_to_folder([puzzle_dir / "fragments"], out, seed=0)
-    return out
-
-
 @pytest.mark.parametrize("spec", smoke_set(), ids=lambda s: s.name)
 def test_run_solves_smoke_set(spec, tmp_path):
     puzzle = tmp_path / "puzzle"

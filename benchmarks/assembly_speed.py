@@ -2,12 +2,15 @@
 
     python benchmarks/assembly_speed.py                       # spot, 10 and 20 pieces, ~10k faces each, --jobs 2
     python benchmarks/assembly_speed.py --pieces 5,10,20 --cut-edge 0.004 --jobs 2
+    python benchmarks/assembly_speed.py --view                # also time `reassemble view` on the result
 
 Breaks a bundled mesh (`reassemble break`, cut-surface edge length --cut-edge of the
 diagonal: 0.0055 gives ~10k faces per fragment at 10 pieces of the cow), then times the
 real command line, `python -m reassemble run FRAGMENTS --out DIR --jobs J --quiet`, from
 process start to written files (imports and worker start-up included), and scores it.
-Run it on an idle machine.
+With --view, then times `python -m reassemble view OUT --quiet` the same way (all
+pictures and report.html) and reports the pictures and the page's size. Run it on an
+idle machine.
 """
 
 from __future__ import annotations
@@ -34,13 +37,15 @@ def main() -> int:
     parser.add_argument("--cut-edge", type=float, default=0.0055)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--view", action="store_true", help="also time `reassemble view` on each result")
     args = parser.parse_args()
     header()
     from reassemble.pipeline import break_to_folder, evaluate_files, read_puzzle
     from reassemble.synth import BreakParams
 
     print(f"{'puzzle':<24s} {'faces/frag':>10s} {'run s':>7s} {'prepare':>8s} {'pairs':>6s} {'assembly':>8s} "
-          f"{'placed':>6s} {'strict':>6s} {'solved':>6s}")
+          f"{'placed':>6s} {'strict':>6s} {'solved':>6s}" + (f" {'view s':>6s} {'pictures':>8s} {'html MB':>7s}"
+                                                              if args.view else ""))
     for n in (int(p) for p in args.pieces.split(",")):
         with tempfile.TemporaryDirectory() as tmp:
             puzzle = Path(tmp) / "puzzle"
@@ -59,9 +64,20 @@ def main() -> int:
             s = evaluate_files(Path(tmp) / "out" / "transforms.json", puzzle / "ground_truth.json")
             s = s["alignments"]["anchor_largest"]["summary"]
             t_ = report["summary"]["timings_s"]
+            view = ""
+            if args.view:
+                t = time.perf_counter()
+                proc = subprocess.run([sys.executable, "-m", "reassemble", "view", str(Path(tmp) / "out"), "--quiet"],
+                                      capture_output=True, text=True)
+                if proc.returncode:
+                    print(proc.stderr)
+                    return 1
+                pictures = len(list((Path(tmp) / "out" / "pictures").rglob("*.png")))
+                mb = (Path(tmp) / "out" / "report.html").stat().st_size / 1e6
+                view = f" {time.perf_counter() - t:>6.1f} {pictures:>8d} {mb:>7.1f}"
             print(f"{args.mesh + f'_{n:02d}p_s{args.seed}':<24s} {faces:>10.0f} {elapsed:>7.1f} {t_['prepare']:>8.1f} "
                   f"{t_['pairs']:>6.1f} {t_['assembly']:>8.1f} {report['summary']['placed']:>6d} "
-                  f"{s['part_acc_strict']:>6.3f} {str(s['solved']):>6s}", flush=True)
+                  f"{s['part_acc_strict']:>6.3f} {str(s['solved']):>6s}" + view, flush=True)
     return 0
 
 

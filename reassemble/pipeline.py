@@ -215,6 +215,7 @@ class PreparedFragment:
     segmentation: object
     surface: object
     note: str = ""
+    noise: float = 0.0  # vertex noise sigma, mesh units (geometry.vertex_noise)
 
 
 def reference_size(meshes: list[tuple[np.ndarray, np.ndarray]]) -> float:
@@ -226,18 +227,20 @@ _WORKER: dict = {}  # what a worker process holds between tasks (set by an initi
 
 
 def _describe(task):
-    """(Descriptors or None, note) of one fragment; a failure is a note, not fatal."""
+    """(Descriptors or None, note, vertex noise) of one fragment; a failure is a note, not fatal."""
     from .descriptors import integral_invariants
+    from .geometry import vertex_noise
 
     v, f, radii, params, largest = task
+    noise = vertex_noise(v)
     diag = float(np.linalg.norm(np.ptp(v, axis=0)))
     if diag <= radii.max():
         return None, (f"not matched: too small (bounding-box diagonal {diag:.4g}, below the largest "
-                      f"descriptor radius {radii.max():.4g} = {largest:g} x the median fragment)")
+                      f"descriptor radius {radii.max():.4g} = {largest:g} x the median fragment)"), noise
     try:
-        return integral_invariants(v, f, radii, points=v[f].mean(axis=1), params=params), ""
+        return integral_invariants(v, f, radii, points=v[f].mean(axis=1), params=params), "", noise
     except ReassembleError as exc:  # e.g. a grid over the memory budget: the others go on
-        return None, f"not matched: {exc}"
+        return None, f"not matched: {exc}", noise
 
 
 def _map(fn, tasks, *, jobs: int, initializer=None, initargs=()):
@@ -285,10 +288,11 @@ def prepare_fragments(
     radii = size * np.asarray(config.radii)
     params = DescriptorParams(with_d2=False, principal=True)
     tasks = [(v, f, radii, params, config.radii[-1]) for v, f in pairs]
-    descriptors, notes = [], {}
-    for name, (d, note) in zip(names, tqdm(_map(_describe, tasks, jobs=jobs), total=len(tasks), desc="descriptors",
-                                           disable=not progress)):
+    descriptors, notes, noise = [], {}, []
+    for name, (d, note, sigma) in zip(names, tqdm(_map(_describe, tasks, jobs=jobs), total=len(tasks),
+                                                  desc="descriptors", disable=not progress)):
         descriptors.append(d)
+        noise.append(sigma)
         if note:
             notes[name] = note
     good = [k for k, d in enumerate(descriptors) if d is not None]
@@ -299,7 +303,7 @@ def prepare_fragments(
             segs[k] = s
     rngs = np.random.default_rng(seed).spawn(len(names))
     out = []
-    for name, (v, f), d, s, rng in zip(names, pairs, descriptors, segs, rngs):
+    for name, (v, f), d, s, rng, sigma in zip(names, pairs, descriptors, segs, rngs, noise):
         if s is None:
             s = Segmentation(np.zeros(len(f), bool), np.zeros(len(f)), np.zeros(len(f), int),
                              np.full(len(f), -1), 0.0, float(face_areas(v, f).sum()))
@@ -311,8 +315,21 @@ def prepare_fragments(
             if surf.fracture_area == 0.0:
                 notes[name] = "no fracture surface found; it can only be placed by others"
                 log.warning("%s: %s", name, notes[name])
-        out.append(PreparedFragment(name, v, f, d, s, surf, notes.get(name, "")))
+        out.append(PreparedFragment(name, v, f, d, s, surf, notes.get(name, ""), sigma))
     return out, size
+
+
+def set_noise(fragments: list[PreparedFragment]) -> float:
+    """The vertex noise of a fragment set (mesh units): the median of its fragments'."""
+    return float(np.median([f.noise for f in fragments])) if fragments else 0.0
+
+
+def registration_params(fragments: list[PreparedFragment], *, size: float, params=None):
+    """The registration options for this set, resolved from the data: ``params`` (default
+    ``RegistrationParams()``) with the contact tolerance raised to cover its vertex noise."""
+    from .registration import RegistrationParams, with_noise
+
+    return with_noise(params or RegistrationParams(), noise=set_noise(fragments), size=size)
 
 
 def _pair_worker_init(surfaces, meshes, size, params) -> None:
@@ -347,12 +364,11 @@ def match_pairs(
 
     ``jobs`` > 1 registers pairs in that many processes; every pair has its own random
     stream (spawned from ``seed`` in pair order), so results do not depend on ``jobs``.
+    ``params``: default :func:`registration_params` of the fragments (noise-aware tolerance).
     """
     from tqdm import tqdm
 
-    from .registration import RegistrationParams
-
-    params = params or RegistrationParams()
+    params = params or registration_params(fragments, size=size)
     if pairs is None:
         pairs = [(i, j) for i in range(len(fragments)) for j in range(i + 1, len(fragments))]
     rngs = np.random.default_rng(seed).spawn(len(pairs))
@@ -450,11 +466,12 @@ def _write_debug(tmp: Path, frags: list[PreparedFragment], results: dict) -> Non
                   T_target_source=res.best.T_target_source)
 
 
-def _resolved(seed: int, size: float, **stages) -> dict:
-    out = {"seed": seed, "reference_size": size}
+def _resolved(seed: int, size: float, noise: float, **stages) -> dict:
+    out = {"seed": seed, "reference_size": size, "vertex_noise": noise / size}
     out.update({k: dataclasses.asdict(v) for k, v in stages.items()})
-    out["note"] = ("lengths in the stage options are fractions of reference_size "
-                   "(the median fragment bounding-box diagonal)")
+    out["note"] = ("lengths in the stage options and vertex_noise are fractions of reference_size "
+                   "(the median fragment bounding-box diagonal); registration.tolerance is at least "
+                   "noise_tolerance x sqrt(2) x vertex_noise")
     return out
 
 
@@ -477,9 +494,10 @@ def match_to_folder(
     if Path(out).exists() and not force:  # before minutes of work, not after
         raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
     meshes, warnings = load_fragments(inputs)
-    seg_params, reg_params = SegmentParams(), RegistrationParams()
+    seg_params = SegmentParams()
     frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,
                                      progress=progress)
+    reg_params = registration_params(frags, size=size, params=RegistrationParams())
     results = match_pairs(frags, size=size, params=reg_params, seed=seed, jobs=jobs, progress=progress)
     pairs = _pairs_json(frags, results)
     with staged_directory(out, force=force) as tmp:
@@ -487,7 +505,7 @@ def match_to_folder(
                                         "version": __version__, "pairs": pairs})
         write_json(tmp / "fragments.json", {"fragments": {f.name: _fragment_entry(f) for f in frags},
                                             "warnings": warnings})
-        write_json(tmp / "config.json", _resolved(seed, size, match=config, segmentation=seg_params,
+        write_json(tmp / "config.json", _resolved(seed, size, set_noise(frags), match=config, segmentation=seg_params,
                                                   registration=reg_params))
         if debug:
             _write_debug(tmp, frags, results)
@@ -526,10 +544,11 @@ def run_to_folder(
     timings = {}
     t0 = time.perf_counter()
     meshes, warnings = load_fragments(inputs)
-    seg_params, reg_params = SegmentParams(), RegistrationParams()
+    seg_params = SegmentParams()
     assembly_params = assembly_params or AssemblyParams()
     frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,
                                      progress=progress)
+    reg_params = registration_params(frags, size=size, params=RegistrationParams())
     t1 = time.perf_counter()
     results = match_pairs(frags, size=size, params=reg_params, seed=seed, jobs=jobs, progress=progress)
     t2 = time.perf_counter()
@@ -575,7 +594,9 @@ def run_to_folder(
         "summary": {
             "fragments": len(frags), "placed": int(A.placed.sum()),
             "sub_assemblies": sum(len(g) > 1 for g in groups), "alone": sum(len(g) == 1 for g in groups),
-            "contacts": len(A.contacts), "timings_s": {k: round(v, 2) for k, v in timings.items()},
+            "contacts": len(A.contacts),
+            "vertex_noise": _round(set_noise(frags) / size), "contact_tolerance": _round(reg_params.tolerance),
+            "timings_s": {k: round(v, 2) for k, v in timings.items()},
         },
         "groups": groups,
         "fragments": fragment_report,
@@ -589,7 +610,7 @@ def run_to_folder(
         write_json(tmp / "pairs.json", {"format": "reassemble-pairs/1", "convention": "T_target_source",
                                         "version": __version__, "pairs": _pairs_json(frags, results)})
         write_json(tmp / "report.json", report)
-        write_json(tmp / "config.json", _resolved(seed, size, match=config, segmentation=seg_params,
+        write_json(tmp / "config.json", _resolved(seed, size, set_noise(frags), match=config, segmentation=seg_params,
                                                   registration=reg_params, assembly=assembly_params))
         write_npz(tmp / "analysis.npz", **_analysis_arrays(frags, A.contacts, touching, size=size, config=config))
         write_glb(tmp / "assembled.glb", {f.name: (f.vertices, f.faces) for f in frags},

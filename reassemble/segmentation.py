@@ -46,6 +46,8 @@ class SegmentParams:
     min_samples : patches with fewer samples use the descriptor score alone
     min_fracture_share : a mixture component labelled fracture that covers less of the
         set's area than this is joined by the next roughest
+    noise_smoothing : Taubin smoothing iterations of the retry on smoothed geometry when
+        the labelled fracture still covers less than ``min_fracture_share`` of the set
     """
 
     crease_angle: float = 30.0
@@ -55,6 +57,7 @@ class SegmentParams:
     samples: int = 30000
     min_samples: int = 12
     min_fracture_share: float = 0.1
+    noise_smoothing: int = 5
 
 
 @dataclass
@@ -185,15 +188,45 @@ def segment(
     -------
     list of Segmentation, one per mesh
     """
+    out = _segment(meshes, descriptors, size=size, params=params, seed=seed, smoothing=0)
+    if _share(out) < params.min_fracture_share and params.noise_smoothing:
+        # Under scan noise the crease angles and face normals are noise: patches shatter and
+        # the roughness of the break drowns (noisy cow in 12 pieces: 8 % labelled, 55 % true,
+        # F1 0.17). Their geometry is then taken from a Taubin-smoothed copy; the integral
+        # invariants, being integrals, stay (F1 0.86). Only as a retry: where the first pass
+        # finds a break, smoothing costs more than it gives (noisy wing nut 8 pieces: 0.84 -> 0.59).
+        retry = _segment(meshes, descriptors, size=size, params=params, seed=seed, smoothing=params.noise_smoothing)
+        if _share(retry) > _share(out):
+            out = retry
+    return out
+
+
+def _share(segmentations: list[Segmentation]) -> float:
+    return sum(s.fracture_area for s in segmentations) / max(sum(s.area for s in segmentations), 1e-300)
+
+
+def _smoothed(vertices: np.ndarray, faces: np.ndarray, iterations: int) -> np.ndarray:
+    """Vertices after Taubin smoothing (no shrinkage), a new array."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(vertices.copy(), faces, process=False)
+    trimesh.smoothing.filter_taubin(mesh, lamb=0.5, nu=0.53, iterations=iterations)
+    return np.asarray(mesh.vertices, dtype=np.float64)
+
+
+def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: int, smoothing: int) -> list[Segmentation]:
+    """One segmentation pass; with ``smoothing`` > 0 patches, face normals and quadric fits
+    come from Taubin-smoothed vertices (areas from the given ones)."""
     from sklearn.mixture import GaussianMixture
 
     rng = np.random.default_rng(seed)
     frags = []
-    for (vertices, faces), d in zip(meshes, descriptors):
-        vertices, faces = np.asarray(vertices, float), np.asarray(faces, np.int64)
+    for (given, faces), d in zip(meshes, descriptors):
+        given, faces = np.asarray(given, float), np.asarray(faces, np.int64)
+        vertices = _smoothed(given, faces, smoothing) if smoothing else given
         patch, pairs, dihedral = make_patches(vertices, faces, size=size, params=params)
         n_patches = int(patch.max()) + 1
-        area = face_areas(vertices, faces)
+        area = face_areas(given, faces)
         patch_area = np.bincount(patch, area, n_patches)
         samples, face_of_sample = sample_surface(vertices, faces, params.samples, rng=rng)
         residual = quadric_residual(samples, patch[face_of_sample], n_patches, min_samples=params.min_samples)

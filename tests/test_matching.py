@@ -104,3 +104,44 @@ def test_crumb_and_intact_object_reported_not_fatal(puzzle):
     results = match_pairs(frags, size=size, seed=0)
     i = [f.name for f in frags].index("crumb")
     assert all(not r.touching and not r.candidates for (a, b), r in results.items() if i in (a, b))
+
+
+def _sphere(rng, sigma):
+    import trimesh
+
+    s = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+    return np.asarray(s.vertices) + rng.normal(scale=sigma, size=s.vertices.shape), np.asarray(s.faces)
+
+
+def test_vertex_noise_estimates_added_noise_and_sets_the_tolerance(rng):
+    from reassemble.geometry import vertex_noise
+    from reassemble.registration import RegistrationParams, with_noise
+
+    clean, faces = _sphere(rng, 0.0)
+    noisy, _ = _sphere(rng, 0.005)  # 6 % of the edge length, as the noisy bench sets
+    before = noisy.copy()
+    assert vertex_noise(clean) < 0.0005
+    assert 0.75 * 0.005 < vertex_noise(noisy) < 0.9 * 0.005  # 0.82 sigma expected: see its docstring
+    assert np.array_equal(noisy, before)
+    default = RegistrationParams()
+    assert with_noise(default, noise=0.0, size=1.0) == default
+    raised = with_noise(default, noise=0.005, size=1.0)
+    assert raised.tolerance == pytest.approx(2.5 * np.sqrt(2) * 0.005) and raised.tolerance > default.tolerance
+    assert with_noise(default, noise=0.005, size=10.0).tolerance == default.tolerance  # relative to the size
+
+
+@pytest.mark.parametrize("shares, expected", [((0.05, 0.4), 1), ((0.05, 0.03), 0), ((0.3, 0.9), 0)])
+def test_segmentation_retries_on_smoothed_geometry_only_when_the_break_is_a_sliver(monkeypatch, shares, expected):
+    import reassemble.segmentation as seg
+
+    calls = []
+
+    def fake(meshes, descriptors, *, size, params, seed, smoothing):
+        calls.append(smoothing)
+        share = shares[1 if smoothing else 0]
+        return [seg.Segmentation(np.zeros(1, bool), np.zeros(1), np.zeros(1, int), np.zeros(1, int), share, 1.0)]
+
+    monkeypatch.setattr(seg, "_segment", fake)
+    out = seg.segment([(None, None)], [None], size=1.0)
+    assert out[0].fracture_area == shares[expected]
+    assert calls == ([0, seg.SegmentParams().noise_smoothing] if shares[0] < 0.1 else [0])

@@ -110,7 +110,7 @@ def assembly_pictures(
     *,
     placed: np.ndarray,
     colors: np.ndarray,
-    explode: float = 0.6,
+    explode: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(views, exploded): the whole result from six sides (unplaced fragments where
     ``T_world`` put them, beside the assembly), and the placed fragments pushed outward

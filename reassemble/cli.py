@@ -124,10 +124,11 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _cmd_match(args: argparse.Namespace) -> int:
-    from .pipeline import match_to_folder
+    from .pipeline import MatchConfig, match_to_folder
 
     summary = match_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                              jobs=_jobs(args), progress=not args.quiet)
+                              config=MatchConfig(max_memory=args.max_memory), jobs=_jobs(args),
+                              progress=not args.quiet)
     print(f"{summary['fragments']} fragments, {summary['pairs']} pairs, {summary['touching']} touching:")
     for p in summary["pair_list"]:
         best = p["candidates"][0] if p["candidates"] else None
@@ -157,10 +158,10 @@ def _print_run(report: dict, out: Path) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .pipeline import run_to_folder
+    from .pipeline import MatchConfig, run_to_folder
 
     report = run_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                           jobs=_jobs(args), progress=not args.quiet)
+                           config=MatchConfig(max_memory=args.max_memory), jobs=_jobs(args), progress=not args.quiet)
     _print_run(report, args.out)
     if args.render or args.viewer:
         _view(args.out, render=args.render, viewer=args.viewer, progress=not args.quiet)
@@ -304,6 +305,9 @@ def _add_inputs(p) -> None:
     p.add_argument("--debug-files", action="store_true",
                    help="also write fracture labels as vertex colours (labels/*.ply) and matched keypoints per "
                    "pair (matches/)")
+    p.add_argument("--max-memory", type=_bytes, default=4e9,
+                   help="working memory one fragment's descriptor grid may take, e.g. 4G (default); a fragment "
+                   "that needs more is left out with a note")
     _add_common(p)
 
 

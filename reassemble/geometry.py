@@ -106,6 +106,33 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     return float(tet_volumes(vertices, faces).sum())
 
 
+def face_adjacency(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of faces sharing an edge and that edge's vertices.
+
+    Returns
+    -------
+    pairs : (e, 2) int, face indices
+    edges : (e, 2) int, vertex indices of the shared edge
+    """
+    f = len(faces)
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(f), 3)
+    order = np.lexsort((e[:, 1], e[:, 0]))
+    e, owner = e[order], owner[order]
+    same = np.flatnonzero(np.all(e[1:] == e[:-1], axis=1))
+    # non-manifold edges (more than two faces) pair consecutive owners: good enough here
+    return np.column_stack([owner[same], owner[same + 1]]), e[same]
+
+
+def connected_components(n: int, pairs: np.ndarray) -> tuple[int, np.ndarray]:
+    """(count, (n,) label) of the graph on n nodes with edges ``pairs`` (e, 2)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components as components
+
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return components(graph, directed=False)
+
+
 def make_scene(vertices: np.ndarray, faces: np.ndarray):
     """An Open3D ray-casting scene (BVH) of a triangle mesh, for rays and distance queries."""
     import open3d as o3d

@@ -15,6 +15,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from glob import escape as glob_escape
 from typing import Any, Iterator
 
 import numpy as np
@@ -147,6 +148,37 @@ def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: boo
     )
 
 
+DEBRIS_SHARE = 0.01  # a body under this share of the largest body's volume is scan debris
+
+
+def split_bodies(mesh: MeshData) -> tuple[list[MeshData], int]:
+    """The separate closed bodies of a mesh, largest volume first, and how many tiny ones
+    (under 1 % of the largest's volume: scan debris) were dropped.
+
+    A fragment file normally holds one body; several usually mean several fragments saved
+    together, and each is then a fragment of its own. A shell facing inwards is a cavity of
+    the solid around it, not a body: a mesh with one is kept whole.
+    """
+    from .geometry import connected_components, face_adjacency, signed_volume
+
+    _, labels = connected_components(len(mesh.faces), face_adjacency(mesh.faces)[0])
+    ids = np.unique(labels)
+    if len(ids) == 1:
+        return [mesh], 0
+    bodies = []
+    for k in ids:
+        faces = mesh.faces[labels == k]
+        used, inverse = np.unique(faces, return_inverse=True)
+        v, f = mesh.vertices[used], inverse.reshape(-1, 3)
+        bodies.append((signed_volume(v, f), MeshData(vertices=v.copy(), faces=f.astype(np.int64), path=mesh.path)))
+    if any(vol < 0 for vol, _ in bodies):
+        return [mesh], 0
+    bodies.sort(key=lambda b: -b[0])
+    largest = bodies[0][0]
+    kept = [m for vol, m in bodies if vol >= DEBRIS_SHARE * largest]
+    return kept, len(bodies) - len(kept)
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -275,6 +307,41 @@ def read_transforms(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
     return out
 
 
+def check_output_folder(out: str | os.PathLike, *, force: bool = False) -> None:
+    """Refuse, before any work, an output folder that exists (without ``force``) or that
+    cannot be made (its parent is a file, or not writable)."""
+    out = Path(out)
+    if out.exists() and not force:
+        raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
+    existing = (out.parent if str(out.parent) else Path(".")).absolute()
+    while not existing.exists() and existing != existing.parent:  # made later, with the result
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ReassembleError(f"{out}: cannot create output folder ({existing} is a file)")
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", suffix=".probe", dir=existing))
+    except OSError as exc:
+        raise ReassembleError(f"{out}: cannot create output folder ({exc.strerror})") from None
+
+
+def _remove_stale(parent: Path, name: str) -> None:
+    """Remove the hidden staging folders of earlier runs into ``parent/name`` whose process
+    is gone (killed midway: SIGKILL, power loss), so they do not pile up."""
+    if not parent.is_dir():
+        return
+    for p in parent.glob(f".{glob_escape(name)}.*"):
+        m = re.fullmatch(rf"\.{re.escape(name)}\.(\d+)\.[^.]+\.(partial|old)", p.name)
+        if not m or not p.is_dir():
+            continue
+        pid = int(m.group(1))
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            shutil.rmtree(p, ignore_errors=True)
+        except (PermissionError, OSError):
+            pass  # alive (or not ours to judge)
+
+
 @contextlib.contextmanager
 def staged_directory(out: str | os.PathLike, *, force: bool = False) -> Iterator[Path]:
     """Build an output folder in a temporary sibling and move it into place on success.
@@ -286,16 +353,17 @@ def staged_directory(out: str | os.PathLike, *, force: bool = False) -> Iterator
     if out.exists() and not force:
         raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
     parent = out.parent if str(out.parent) else Path(".")
+    _remove_stale(parent, out.name)
     try:
         parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", suffix=".partial", dir=parent))
         os.chmod(staging, 0o777 & ~_umask())
     except OSError as exc:
         raise ReassembleError(f"{out}: cannot create output folder ({exc.strerror})") from None
     try:
         yield staging
         if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", suffix=".old", dir=parent))
             os.replace(out, old / "previous")
             os.replace(staging, out)
             shutil.rmtree(old, ignore_errors=True)

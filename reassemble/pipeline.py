@@ -17,11 +17,14 @@ from . import __version__
 from .errors import ReassembleError
 from .geometry import canonical_order, face_areas, transform_points
 from .io import (
+    DEBRIS_SHARE,
     TRANSFORMS_CONVENTION,
+    check_output_folder,
     load_mesh,
     read_json,
     read_transforms,
     resolve_mesh_path,
+    split_bodies,
     staged_directory,
     write_glb,
     write_json,
@@ -197,11 +200,14 @@ class MatchConfig:
     radii : descriptor radii
     keypoint_spacing : spacing of fracture keypoints
     samples : fracture and surface samples per fragment (ICP, contact, penetration)
+    max_memory : bytes of working memory one fragment's descriptor grid may take; a
+        fragment that needs more is left out with a note naming ``--max-memory``
     """
 
     radii: tuple[float, ...] = (0.02, 0.04, 0.08)
     keypoint_spacing: float = 0.015
     samples: int = 4000
+    max_memory: float = 4e9
 
 
 @dataclasses.dataclass
@@ -286,7 +292,7 @@ def prepare_fragments(
     pairs = [meshes[n] for n in names]
     size = reference_size(pairs)
     radii = size * np.asarray(config.radii)
-    params = DescriptorParams(with_d2=False, principal=True)
+    params = DescriptorParams(with_d2=False, principal=True, max_memory=config.max_memory)
     tasks = [(v, f, radii, params, config.radii[-1]) for v, f in pairs]
     descriptors, notes, noise = [], {}, []
     for name, (d, note, sigma) in zip(names, tqdm(_map(_describe, tasks, jobs=jobs), total=len(tasks),
@@ -296,6 +302,9 @@ def prepare_fragments(
         if note:
             notes[name] = note
     good = [k for k, d in enumerate(descriptors) if d is not None]
+    if not good:  # nothing to match: say why rather than report every fragment unplaced
+        raise ReassembleError(f"none of the {len(names)} fragments could be matched; "
+                              f"{names[0]}: {notes[names[0]].removeprefix('not matched: ')}")
     segs = [None] * len(names)
     if good:
         for k, s in zip(good, segment([pairs[k] for k in good], [descriptors[k] for k in good], size=size,
@@ -386,8 +395,10 @@ def match_pairs(
 def load_fragments(inputs: list[str | Path]) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:
     """Read fragment meshes from files and folders; a bad file is skipped with a warning.
 
-    Returns the meshes by file stem and the warnings (one line each). Identical fragments
-    (same welded vertices and faces) are kept but warned about.
+    Returns the meshes by name and the warnings (one line each). The name is the file
+    stem; a file holding several separate bodies gives one fragment per body (``stem.1``,
+    ``stem.2``, ... largest first; specks under 1 % of the largest's volume are dropped).
+    A fragment identical to one already read (same welded vertices and faces) is skipped.
     """
     from .io import MESH_SUFFIXES
 
@@ -406,19 +417,28 @@ def load_fragments(inputs: list[str | Path]) -> tuple[dict[str, tuple[np.ndarray
     meshes, warnings, digests = {}, [], {}
     for path in files:
         try:
-            m = load_mesh(path, require_closed=True)
+            whole = load_mesh(path, require_closed=True)
         except ReassembleError as exc:
             warnings.append(f"skipped: {exc}")
             continue
-        name = path.stem
-        if name in meshes:
-            warnings.append(f"skipped: {path}: a fragment named {name!r} was already read")
-            continue
-        digest = hashlib.sha256(np.ascontiguousarray(m.vertices).tobytes() + m.faces.tobytes()).hexdigest()
-        if digest in digests:
-            warnings.append(f"{path}: identical to fragment {digests[digest]!r}")
-        digests.setdefault(digest, name)
-        meshes[name] = (m.vertices, m.faces)
+        bodies, debris = split_bodies(whole)
+        if debris:
+            warnings.append(f"{path}: dropped {debris} tiny separate piece(s) (each under "
+                            f"{DEBRIS_SHARE:.0%} of the main body's volume: scan debris)")
+        names = [path.stem] if len(bodies) == 1 else [f"{path.stem}.{k + 1}" for k in range(len(bodies))]
+        if len(bodies) > 1:
+            warnings.append(f"{path}: holds {len(bodies)} separate bodies, each taken as a fragment "
+                            f"({names[0]} ... {names[-1]}, largest first)")
+        for name, m in zip(names, bodies):
+            if name in meshes:
+                warnings.append(f"skipped: {path}: a fragment named {name!r} was already read")
+                continue
+            digest = hashlib.sha256(np.ascontiguousarray(m.vertices).tobytes() + m.faces.tobytes()).hexdigest()
+            if digest in digests:  # the same piece twice: both would fit the same place, overlapping
+                warnings.append(f"skipped: {path}: identical to fragment {digests[digest]!r}")
+                continue
+            digests[digest] = name
+            meshes[name] = (m.vertices, m.faces)
     for w in warnings:
         log.warning("%s", w)
     if len(meshes) < 2:
@@ -491,8 +511,7 @@ def match_to_folder(
     from .registration import RegistrationParams
     from .segmentation import SegmentParams
 
-    if Path(out).exists() and not force:  # before minutes of work, not after
-        raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
+    check_output_folder(out, force=force)  # before minutes of work, not after
     meshes, warnings = load_fragments(inputs)
     seg_params = SegmentParams()
     frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,
@@ -539,8 +558,7 @@ def run_to_folder(
     from .registration import RegistrationParams
     from .segmentation import SegmentParams
 
-    if Path(out).exists() and not force:  # before minutes of work, not after
-        raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
+    check_output_folder(out, force=force)  # before minutes of work, not after
     timings = {}
     t0 = time.perf_counter()
     meshes, warnings = load_fragments(inputs)
@@ -796,8 +814,7 @@ def demo_to_folder(
     from .synth import BreakParams
 
     out = Path(out)
-    if out.exists() and not force:
-        raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
+    check_output_folder(out, force=force)
     puzzle = break_to_folder(mesh, out / "puzzle", params=BreakParams(pieces=pieces), seed=seed, force=True)
     report = run_to_folder([puzzle / "fragments"], out / "result", seed=seed, force=True, jobs=jobs, progress=progress)
     score = evaluate_files(out / "result" / "transforms.json", puzzle / "ground_truth.json")

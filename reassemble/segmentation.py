@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import face_areas, face_normals, sample_surface
+from .geometry import connected_components, face_adjacency, face_areas, face_normals, sample_surface
 
 
 EXACT_QUADRIC = 1e-6  # relative RMS residual below which a patch is a quadric up to rounding
@@ -81,32 +81,6 @@ class Segmentation:
     area: float
 
 
-def face_adjacency(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs of faces sharing an edge and that edge's vertices.
-
-    Returns
-    -------
-    pairs : (e, 2) int, face indices
-    edges : (e, 2) int, vertex indices of the shared edge
-    """
-    f = len(faces)
-    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    owner = np.tile(np.arange(f), 3)
-    order = np.lexsort((e[:, 1], e[:, 0]))
-    e, owner = e[order], owner[order]
-    same = np.flatnonzero(np.all(e[1:] == e[:-1], axis=1))
-    # non-manifold edges (more than two faces) pair consecutive owners: good enough here
-    return np.column_stack([owner[same], owner[same + 1]]), e[same]
-
-
-def _components(n: int, pairs: np.ndarray) -> tuple[int, np.ndarray]:
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)
-
-
 def make_patches(
     vertices: np.ndarray, faces: np.ndarray, *, size: float, params: SegmentParams = SegmentParams()
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -126,7 +100,7 @@ def make_patches(
     cell = np.floor((centres - centres.min(axis=0)) / (params.patch_size * size)).astype(np.int64)
     cell_id = np.unique(cell, axis=0, return_inverse=True)[1].ravel()
     keep = (dihedral < params.crease_angle) & (cell_id[pairs[:, 0]] == cell_id[pairs[:, 1]])
-    _, patch = _components(len(faces), pairs[keep])
+    _, patch = connected_components(len(faces), pairs[keep])
     return patch, pairs, dihedral
 
 
@@ -319,7 +293,7 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
         idx = np.flatnonzero(fracture)
         if len(idx):
             both = fracture[f.pairs[:, 0]] & fracture[f.pairs[:, 1]]
-            _, comp = _components(len(fracture), f.pairs[both])
+            _, comp = connected_components(len(fracture), f.pairs[both])
             region[idx] = np.unique(comp[idx], return_inverse=True)[1]
         out.append(Segmentation(
             fracture=fracture, probability=prob[f.patch], patch=f.patch, region=region,

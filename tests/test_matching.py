@@ -7,7 +7,8 @@ from reassemble.features import mate_signature
 from reassemble.geometry import face_areas, invert_transform, make_transform, random_rotation, rotation_angle_deg
 from reassemble.pipeline import match_pairs, prepare_fragments
 from reassemble.registration import kabsch
-from reassemble.segmentation import face_adjacency, make_patches
+from reassemble.geometry import face_adjacency
+from reassemble.segmentation import make_patches
 
 
 @pytest.fixture(scope="module")

@@ -149,13 +149,16 @@ def principal_from_moments(V: np.ndarray, m: np.ndarray, M: np.ndarray, r) -> tu
     return diff * diff, vec[:, :, 1], normal
 
 
+def _human(nbytes: float) -> str:
+    return f"{nbytes / 1e9:.1f} GB" if nbytes >= 1e8 else f"{nbytes / 1e6:.0f} MB"
+
+
 def _check_grid(grid: Grid, max_memory: float, what: str) -> None:
     need = grid.size * BYTES_PER_VOXEL
     if need > max_memory:
         raise ReassembleError(
             f"{what}: a {grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} grid needs about "
-            f"{need / 1e9:.1f} GB (limit {max_memory / 1e9:.1f} GB): raise --max-memory, "
-            "lower --resolution, or use larger radii"
+            f"{_human(need)} (limit {_human(max_memory)}): raise --max-memory if the machine has it"
         )
 
 

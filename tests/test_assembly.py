@@ -199,3 +199,24 @@ def test_missing_fragment_others_still_right(tmp_path):
         want = invert_transform(truth[ref]["transform"]) @ truth[n]["transform"]
         assert rotation_angle_deg(got[:3, :3], want[:3, :3]) < 0.5
         assert np.linalg.norm(got[:3, 3] - want[:3, 3]) < 0.005 * diag
+
+
+def test_units_do_not_matter(run_dir, puzzle_dir, tmp_path):
+    """The same fragments in millimetres instead of metres: the same result, up to scale."""
+    import trimesh
+
+    scaled = tmp_path / "mm"
+    scaled.mkdir()
+    for p in sorted((puzzle_dir / "fragments").iterdir()):
+        m = trimesh.load(p, process=False)
+        trimesh.Trimesh(m.vertices * 1000.0, m.faces, process=False).export(scaled / p.name)
+    run_to_folder([scaled], tmp_path / "out", seed=0)
+    metres, millimetres = read_transforms(run_dir / "transforms.json"), read_transforms(tmp_path / "out" / "transforms.json")
+    diag = max(np.linalg.norm(np.ptp(trimesh.load(p).vertices, axis=0)) for p in (puzzle_dir / "fragments").iterdir())
+    assert sorted(metres) == sorted(millimetres)
+    for name, m in metres.items():
+        mm = millimetres[name]
+        assert m["placed"] == mm["placed"]
+        assert rotation_angle_deg(m["transform"][:3, :3], mm["transform"][:3, :3]) < 0.05
+        assert np.linalg.norm(m["transform"][:3, 3] - mm["transform"][:3, 3] / 1000.0) < 1e-3 * diag
+        assert abs(m["confidence"] - mm["confidence"]) < 0.02

@@ -40,7 +40,7 @@ def _cmd_break(args: argparse.Namespace) -> int:
 
     params = BreakParams(
         pieces=args.pieces, roughness=args.roughness, cut_edge=args.cut_edge, noise=args.noise,
-        chips=args.chips, chip_size=args.chip_size, decimate=args.decimate, scale=args.scale,
+        chips=args.chips, chip_size=args.chip_size, decimate=args.decimate, gap=args.gap, scale=args.scale,
     )
     out = break_to_folder(args.mesh, args.out, params=params, seed=args.seed, force=args.force)
     print(f"wrote {args.pieces} fragments and the ground truth to {out}/")
@@ -242,6 +242,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="typical chip radius / object diagonal (default 0.02)")
     p.add_argument("--decimate", type=_number, default=0.0,
                    help="simplify fragments to this tolerance / object diagonal (default 0: off)")
+    p.add_argument("--gap", type=_number, default=0.0,
+                   help="material lost at the break: mating surfaces end this far apart / diagonal (default 0)")
     p.add_argument("--scale", type=_number, default=1.0,
                    help="scale the mesh first, e.g. 1000 for metres to millimetres (default 1)")
     p.set_defaults(func=_cmd_break)

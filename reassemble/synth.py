@@ -49,6 +49,8 @@ class BreakParams:
     chips : mean number of chipped-off losses per fragment, along the break
     chip_size : typical chip radius, fraction of the object diagonal
     decimate : simplification tolerance, fraction of the object diagonal (0 = off)
+    gap : material lost at the break: every fracture surface is eroded by half of it along
+        its normals, so mating surfaces end about this far apart (fraction of the diagonal)
     min_volume : smallest allowed fragment, as a fraction of the mean fragment volume
     min_thickness : thinnest allowed part of a cut, as a fraction of the piece's thickness
     scale : factor applied to the input mesh first (to make puzzles in other units)
@@ -62,6 +64,7 @@ class BreakParams:
     chips: float = 0.0
     chip_size: float = 0.02
     decimate: float = 0.0
+    gap: float = 0.0
     min_volume: float = 0.3
     min_thickness: float = 0.35
     scale: float = 1.0
@@ -72,7 +75,7 @@ class BreakParams:
             raise ReassembleError(f"--pieces must be at least 2 (got {self.pieces})")
         if self.pieces > 200:
             raise ReassembleError(f"--pieces must be at most 200 (got {self.pieces})")
-        for name in ("roughness", "noise", "chips", "decimate"):
+        for name in ("roughness", "noise", "chips", "decimate", "gap"):
             if not getattr(self, name) >= 0:
                 raise ReassembleError(f"--{name} must be >= 0 (got {getattr(self, name)})")
         if not 0.0 < self.roughness <= 0.5:
@@ -354,6 +357,22 @@ def _contacts(world: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], tol: 
     return contacts
 
 
+def _erode(vertices: np.ndarray, faces: np.ndarray, fracture: np.ndarray, depth: float) -> np.ndarray:
+    """Vertices of the fracture faces moved ``depth`` inwards along their (fracture-face)
+    normals; a new array."""
+    from .geometry import face_areas, face_normals
+
+    weighted = face_normals(vertices, faces)[fracture] * face_areas(vertices, faces)[fracture, None]
+    normals = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(normals, faces[fracture, k], weighted)
+    length = np.linalg.norm(normals, axis=1)
+    moved = length > 0
+    out = np.array(vertices, dtype=np.float64, copy=True)
+    out[moved] -= depth * normals[moved] / length[moved, None]
+    return out
+
+
 def break_mesh(
     vertices: np.ndarray, faces: np.ndarray, params: BreakParams, *, rng: np.random.Generator
 ) -> Puzzle:
@@ -410,6 +429,9 @@ def break_mesh(
             raise RuntimeError("manifold3d lost the origin of some triangles")
         world.append((name, v, f, labels))
     contacts = _contacts(world, tol=max(1e-5, 2.0 * params.decimate) * diag)
+    if params.gap > 0:  # after the contacts: they are the true neighbours, gap or not
+        world = [(name, _erode(v, f, labels == FRACTURE, 0.5 * params.gap * diag), f, labels)
+                 for name, v, f, labels in world]
 
     fragments = []
     for name, v, f, labels in world:

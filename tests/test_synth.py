@@ -128,3 +128,24 @@ def test_bad_parameters_are_named():
                          ({"pieces": 3, "scale": 0}, "--scale")):
         with pytest.raises(ReassembleError, match=word):
             break_mesh(mesh.vertices, mesh.faces, BreakParams(**kwargs), rng=np.random.default_rng(0))
+
+
+def test_gap_option_moves_mating_surfaces_apart():
+    from reassemble.geometry import make_scene
+
+    mesh = _original("spot_low_resolution")
+    diag = np.linalg.norm(np.ptp(mesh.vertices, axis=0))
+    base = break_mesh(mesh.vertices, mesh.faces, BreakParams(pieces=2), rng=np.random.default_rng(5))
+    gapped = break_mesh(mesh.vertices, mesh.faces, BreakParams(pieces=2, gap=0.01), rng=np.random.default_rng(5))
+    assert [c.area for c in gapped.contacts] == [c.area for c in base.contacts]  # the true neighbours
+    assert _volume(gapped) < _volume(base)
+    a, b = gapped.fragments
+    world = [transform_points(f.T_world_fragment, f.vertices) for f in (a, b)]
+    import open3d as o3d
+
+    scene = make_scene(world[1], b.faces)
+    on_break = np.unique(a.faces[a.labels == 1])
+    d = scene.compute_distance(o3d.core.Tensor(world[0][on_break].astype(np.float32))).numpy()
+    assert abs(np.median(d) / diag - 0.01) < 0.002  # mating surfaces about the gap apart
+    with pytest.raises(ReassembleError, match="--gap"):
+        BreakParams(pieces=2, gap=-1).check()

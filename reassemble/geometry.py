@@ -180,6 +180,19 @@ def vertex_noise(vertices: np.ndarray, *, neighbours: int = 16, percentile: floa
     return float(np.percentile(np.concatenate(rms), percentile))
 
 
+def decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) simplified to about ``target_faces`` triangles (quadric error
+    decimation, Open3D); the mesh itself when it has no more than that. New arrays."""
+    if len(faces) <= target_faces:
+        return np.array(vertices, dtype=np.float64, copy=True), np.array(faces, dtype=np.int64, copy=True)
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(vertices, np.float64)),
+                                     o3d.utility.Vector3iVector(np.asarray(faces, np.int32)))
+    small = mesh.simplify_quadric_decimation(target_number_of_triangles=int(target_faces))
+    return np.asarray(small.vertices, np.float64), np.asarray(small.triangles, np.int64)
+
+
 def farthest_points(points: np.ndarray, count: int) -> np.ndarray:
     """Indices of up to ``count`` points spread over ``points`` (n, 3): greedy farthest-point
     order from the point nearest the centroid (deterministic)."""

@@ -374,19 +374,15 @@ def staged_directory(out: str | os.PathLike, *, force: bool = False) -> Iterator
             shutil.rmtree(staging, ignore_errors=True)
 
 
-def write_glb(
-    path: str | os.PathLike,
+def glb_bytes(
     meshes: dict[str, tuple[np.ndarray, np.ndarray]],
     T_world_fragment: dict[str, np.ndarray],
     *,
     colors: dict[str, np.ndarray] | None = None,
-) -> None:
-    """Write a binary glTF scene atomically: one node per fragment, named by it.
-
-    Each node holds the fragment's mesh in its own coordinates and ``T_world_fragment`` as
-    its transform, so a viewer shows the assembly and the file keeps the poses.
-    ``colors``: optional name -> (3,) uint8 colour per fragment.
-    """
+) -> bytes:
+    """A binary glTF scene: one node per fragment, named by it, holding the fragment's mesh
+    in its own coordinates and ``T_world_fragment`` as its transform (so a viewer shows the
+    assembly and the file keeps the poses). ``colors``: optional name -> (3,) uint8."""
     import trimesh
 
     scene = trimesh.Scene()
@@ -399,7 +395,18 @@ def write_glb(
                                                              roughnessFactor=0.8, name=name))
         scene.add_geometry(mesh, node_name=name, geom_name=name,
                            transform=np.asarray(T_world_fragment[name], dtype=np.float64))
-    _atomic_write(Path(path), scene.export(file_type="glb"))
+    return scene.export(file_type="glb")
+
+
+def write_glb(
+    path: str | os.PathLike,
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]],
+    T_world_fragment: dict[str, np.ndarray],
+    *,
+    colors: dict[str, np.ndarray] | None = None,
+) -> None:
+    """Write :func:`glb_bytes` of the fragments atomically."""
+    _atomic_write(Path(path), glb_bytes(meshes, T_world_fragment, colors=colors))
 
 
 def write_bytes(path: str | os.PathLike, data: bytes) -> None:

@@ -666,6 +666,7 @@ def _analysis_arrays(frags: list[PreparedFragment], contacts, touching, *, size:
 
 VIEW_HINT = "`reassemble run FRAGMENTS --out {folder}` makes one"
 _PICTURE_FOLDERS = {"fragment": "fragments", "match": "matches"}
+VIEWER_FACES = 200_000
 
 
 def view_folder(
@@ -678,7 +679,8 @@ def view_folder(
     ``fragments/NAME.png``: fracture labels and mean curvature from both sides;
     ``matches/A__B.png``: each accepted contact pulled apart with lines between touching
     points, and in contact), replaced as a whole, and ``folder/report.html``: one
-    self-contained page (interactive 3D view, pictures, tables; with ``truth`` a
+    self-contained page (interactive 3D view, its meshes decimated to 200k triangles in all;
+    pictures; tables; with ``truth`` a
     ``ground_truth.json``, or a ``score.json`` in the folder, the metrics). Where no OpenGL
     context can be made the pictures are skipped with a warning and the page is still written.
     ``radius``: the descriptor radius of the curvature pictures, as a fraction of the
@@ -689,7 +691,8 @@ def view_folder(
     """
     from tqdm import tqdm
 
-    from .io import read_glb, write_bytes, write_text
+    from .geometry import decimate
+    from .io import glb_bytes, read_glb, write_bytes, write_text
     from .viz.report import report_html
 
     folder = Path(folder)
@@ -752,8 +755,12 @@ def view_folder(
                     path = tmp / f"{kind}.png" if not name else tmp / _PICTURE_FOLDERS[kind] / f"{name}.png"
                     path.parent.mkdir(exist_ok=True)
                     write_bytes(path, png)
+    # the page's 3D view: at most VIEWER_FACES triangles in all, so scans stay mailable
+    per = max(2000, VIEWER_FACES // max(1, len(names)))
+    light = {n: decimate(v, f, per) for n, (v, f) in zip(names, meshes)}
+    page_glb = glb_bytes(light, dict(zip(names, T_world)), colors=dict(zip(names, colors)))
     page = report_html(report, title=folder.resolve().name, colors=dict(zip(names, colors)),
-                       glb=glb_path.read_bytes(), pictures=pictures, metrics=metrics, notes=notes)
+                       glb=page_glb, pictures=pictures, metrics=metrics, notes=notes)
     write_text(folder / "report.html", page)
     if viewer:
         from .viz.pictures import posed_shapes

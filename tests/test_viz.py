@@ -177,3 +177,17 @@ def test_view_bad_input(run_dir, tmp_path):
         if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
             pytest.skip("a display exists here: --viewer would open a window")
         show_interactive([])
+
+
+def test_decimate_for_the_viewer():
+    import trimesh
+
+    from reassemble.geometry import decimate
+
+    s = trimesh.creation.icosphere(subdivisions=5)  # 20480 faces
+    v, f = np.asarray(s.vertices), np.asarray(s.faces)
+    small_v, small_f = decimate(v, f, 2000)
+    assert 1500 <= len(small_f) <= 2000
+    assert np.allclose(np.linalg.norm(small_v, axis=1), 1.0, atol=0.02)  # still the sphere
+    same_v, same_f = decimate(v, f, 50000)
+    assert np.array_equal(same_f, f) and np.array_equal(same_v, v) and same_v is not v

@@ -689,8 +689,6 @@ def view_folder(
 
     Returns a summary: pictures written, the page's path, why pictures were skipped.
     """
-    from tqdm import tqdm
-
     from .geometry import decimate
     from .io import glb_bytes, read_glb, write_bytes, write_text
     from .viz.report import report_html
@@ -744,7 +742,7 @@ def view_folder(
     if render:
         pictures, problem = _render_pictures(
             meshes, T_world, placed=placed, colors=colors, analysis=analysis, names=names, r_index=r_index,
-            width=width, height=height, progress=progress, tqdm=tqdm)
+            width=width, height=height, progress=progress)
         if problem:
             log.warning("%s: pictures skipped: %s", folder, problem)
             notes.append(f"Pictures skipped: {problem}.")
@@ -770,8 +768,10 @@ def view_folder(
     return {"pictures": len(pictures), "report": str(folder / "report.html"), "skipped": problem}
 
 
-def _render_pictures(meshes, T_world, *, placed, colors, analysis, names, r_index, width, height, progress, tqdm):
+def _render_pictures(meshes, T_world, *, placed, colors, analysis, names, r_index, width, height, progress):
     """(PNG bytes per picture key, None) or ({}, why no picture can be made)."""
+    from tqdm import tqdm
+
     from .io import png_bytes
     from .viz.pictures import assembly_pictures, fragment_picture, match_picture
     from .viz.render import Renderer, RenderUnavailable, gl_problem

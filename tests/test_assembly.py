@@ -108,7 +108,8 @@ def test_run_is_deterministic_and_independent_of_jobs(run_dir, puzzle_dir, tmp_p
     run_to_folder([puzzle_dir / "fragments"], tmp_path / "out", seed=0, jobs=2)
     a, b = tree_digest(run_dir), tree_digest(tmp_path / "out")
     assert sorted(a) == sorted(b)
-    for k in ("transforms.json", "report.json", "pairs.json", "assembled.glb", "assembled.ply"):
+    for k in ("transforms.json", "report.json", "pairs.json", "assembled.glb", "assembled.ply", "analysis.npz",
+              "config.json"):
         if k == "report.json":  # holds timings
             ra, rb = json.loads(a[k]), json.loads(b[k])
             ra["summary"].pop("timings_s"), rb["summary"].pop("timings_s")

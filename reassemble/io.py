@@ -14,8 +14,8 @@ import re
 import shutil
 import tempfile
 from dataclasses import dataclass
-from pathlib import Path
 from glob import escape as glob_escape
+from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
@@ -338,7 +338,7 @@ def _remove_stale(parent: Path, name: str) -> None:
             os.kill(pid, 0)
         except ProcessLookupError:
             shutil.rmtree(p, ignore_errors=True)
-        except (PermissionError, OSError):
+        except OSError:
             pass  # alive (or not ours to judge)
 
 
@@ -350,8 +350,7 @@ def staged_directory(out: str | os.PathLike, *, force: bool = False) -> Iterator
     once the new folder is complete, so a failure never destroys earlier results.
     """
     out = Path(out)
-    if out.exists() and not force:
-        raise ReassembleError(f"{out}: output folder exists (use --force to replace it)")
+    check_output_folder(out, force=force)
     parent = out.parent if str(out.parent) else Path(".")
     _remove_stale(parent, out.name)
     try:

@@ -306,10 +306,9 @@ def prepare_fragments(
         raise ReassembleError(f"none of the {len(names)} fragments could be matched; "
                               f"{names[0]}: {notes[names[0]].removeprefix('not matched: ')}")
     segs = [None] * len(names)
-    if good:
-        for k, s in zip(good, segment([pairs[k] for k in good], [descriptors[k] for k in good], size=size,
-                                      params=segment_params or SegmentParams(), seed=seed)):
-            segs[k] = s
+    for k, s in zip(good, segment([pairs[k] for k in good], [descriptors[k] for k in good], size=size,
+                                  params=segment_params or SegmentParams(), seed=seed)):
+        segs[k] = s
     rngs = np.random.default_rng(seed).spawn(len(names))
     out = []
     for name, (v, f), d, s, rng, sigma in zip(names, pairs, descriptors, segs, rngs, noise):
@@ -388,8 +387,6 @@ def match_pairs(
                          total=len(tasks), desc="pairs", disable=not progress):
         results[key] = res
     return results
-
-
 
 
 def load_fragments(inputs: list[str | Path]) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:

@@ -108,22 +108,22 @@ def _thinned(surface: FractureSurface, count: int) -> FractureSurface:
         surface=surface.surface[:p], surface_area=surface.surface_area * len(surface.surface) / max(p, 1))
 
 
-def _evaluate(pairs, poses, surfaces, scenes, *, tol, reg_params, centres, radii, cache):
+def _evaluate(pairs, poses, surfaces, scenes, *, tol, reg_params, centres, radii, cache, gap=0.0):
     """Pair scores (score, contact, penetration) of the given fragment pairs at the given poses."""
     out = {}
     for p, q in pairs:
-        if not _near(poses[p], poses[q], p, q, centres, radii, tol):
+        if not _near(poses[p], poses[q], p, q, centres, radii, tol + gap):
             continue
         T_q_p = invert_transform(poses[q]) @ poses[p]
         key = (p, q, np.round(T_q_p, 9).tobytes())
         if key not in cache:
             cache[key] = contact_score(surfaces[p], surfaces[q], T_q_p, source_scene=scenes[p],
-                                       target_scene=scenes[q], tol=tol, params=reg_params)
+                                       target_scene=scenes[q], tol=tol, params=reg_params, gap=gap)
         out[(p, q)] = cache[key]
     return out
 
 
-def _merge(proposals, state, *, surfaces, scenes, areas, tol, params, reg_params, centres, radii, cache):
+def _merge(proposals, state, *, surfaces, scenes, areas, tol, params, reg_params, centres, radii, cache, gap):
     """Greedy verified merging (in place on ``state``); returns the merges made."""
     group, poses, members = state
     merges = []
@@ -142,7 +142,8 @@ def _merge(proposals, state, *, surfaces, scenes, areas, tol, params, reg_params
                 trial = dict(moved)
                 trial.update({p: poses[p] for p in members[b]})
                 scores = _evaluate([(q, p) for q in members[a] for p in members[b]], trial, surfaces, scenes,
-                                   tol=tol, reg_params=reg_params, centres=centres, radii=radii, cache=cache)
+                                   tol=tol, reg_params=reg_params, centres=centres, radii=radii, cache=cache,
+                                   gap=gap)
                 ok = all(pen <= params.max_penetration * min(areas[p], areas[q])
                          for (q, p), (_, _, pen) in scores.items())
                 gain = sum(s for s, _, _ in scores.values())
@@ -159,9 +160,11 @@ def _merge(proposals, state, *, surfaces, scenes, areas, tol, params, reg_params
         merges.append((i, j, float(gain)))
 
 
-def group_surface(surfaces: list[FractureSurface], T_group_fragment: np.ndarray, *, tol: float) -> FractureSurface:
+def group_surface(
+    surfaces: list[FractureSurface], T_group_fragment: np.ndarray, *, tol: float, gap: float = 0.0
+) -> FractureSurface:
     """One FractureSurface for a sub-assembly: its members' fracture surfaces that are still
-    free (farther than ``2 tol`` from another member's), in the group frame.
+    free (farther than ``2 tol + gap`` from another member's), in the group frame.
 
     The samples of the members are thinned to one common density (the coarsest member's),
     taking each member's first samples (they are in random order), so the result is
@@ -174,9 +177,9 @@ def group_surface(surfaces: list[FractureSurface], T_group_fragment: np.ndarray,
         others = [moved[o] for o in range(m) if o != k and len(moved[o])]
         if others and len(moved[k]):
             tree = cKDTree(np.vstack(others))
-            free_samples.append(~np.isfinite(tree.query(moved[k], distance_upper_bound=2 * tol)[0]))
+            free_samples.append(~np.isfinite(tree.query(moved[k], distance_upper_bound=2 * tol + gap)[0]))
             keys = transform_points(T_group_fragment[k], s.keypoints)
-            free_keys.append(~np.isfinite(tree.query(keys, distance_upper_bound=2 * tol)[0]) if len(keys)
+            free_keys.append(~np.isfinite(tree.query(keys, distance_upper_bound=2 * tol + gap)[0]) if len(keys)
                              else np.zeros(0, bool))
         else:
             free_samples.append(np.ones(len(s.samples), bool))
@@ -249,7 +252,7 @@ def assemble(
     from .registration import register_pair
 
     n = len(surfaces)
-    tol = reg_params.tolerance * size
+    tol, gap = reg_params.tolerance * size, reg_params.gap * size
     scenes = [make_scene(v, f) for v, f in meshes]
     centres, radii = _spheres(surfaces)
     areas = np.array([s.area for s in surfaces])
@@ -266,7 +269,7 @@ def assemble(
     # merges are ranked and verified on a thinned sample (4x fewer queries); final contacts use all
     quick = [_thinned(s, params.verify_samples) for s in surfaces]
     common = dict(surfaces=quick, scenes=scenes, areas=areas, tol=tol, params=params, reg_params=reg_params,
-                  centres=centres, radii=radii, cache=cache)
+                  centres=centres, radii=radii, cache=cache, gap=gap)
     merges = _merge(proposals, state, **common)
     tried = set()
     rng = np.random.default_rng(seed)
@@ -279,8 +282,8 @@ def assemble(
                 if len(a) == 1 and len(b) == 1 or (tuple(a), tuple(b)) in tried:
                     continue
                 tried.add((tuple(a), tuple(b)))
-                sa = group_surface([surfaces[k] for k in a], poses[a], tol=tol)
-                sb = group_surface([surfaces[k] for k in b], poses[b], tol=tol)
+                sa = group_surface([surfaces[k] for k in a], poses[a], tol=tol, gap=gap)
+                sb = group_surface([surfaces[k] for k in b], poses[b], tol=tol, gap=gap)
                 scene_a = make_scene(*_union([meshes[k] for k in a], poses[a]))
                 scene_b = make_scene(*_union([meshes[k] for k in b], poses[b]))
                 res = register_pair(sa, sb, source_scene=scene_a, target_scene=scene_b, size=size,
@@ -300,7 +303,7 @@ def assemble(
     for g in members.values():
         if len(g) > 1:
             poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
-                              iterations=params.refine_iterations, anchor=int(np.argmax(areas[g])))
+                              iterations=params.refine_iterations, anchor=int(np.argmax(areas[g])), gap=gap)
 
     # contacts at the final poses, and the groups renumbered by area
     contacts = []
@@ -308,7 +311,7 @@ def assemble(
     for g in members.values():
         pairs = sorted((min(p, q), max(p, q)) for x, p in enumerate(g) for q in g[x + 1:])
         for (p, q), (s, c, pen) in sorted(_evaluate(pairs, poses, surfaces, scenes, tol=tol, reg_params=reg_params,
-                                                    centres=centres, radii=radii, cache={}).items()):
+                                                    centres=centres, radii=radii, cache={}, gap=gap).items()):
             if c > 0:
                 contacts.append(Contact(p, q, float(s), float(c), float(pen)))
                 touching[p] += c
@@ -345,6 +348,7 @@ def refine(
     anchor: int = 0,
     levels: tuple[float, ...] = (2.0, 1.0),
     n_points: int = 1500,
+    gap: float = 0.0,
 ) -> np.ndarray:
     """Joint point-to-plane refinement of the poses of one sub-assembly.
 
@@ -361,6 +365,7 @@ def refine(
     iterations : per level
     anchor : index of the fragment that stays fixed
     n_points : fracture samples per fragment used (the first: they are in random order)
+    gap : separation kept between mating surfaces (mesh units; RegistrationParams.gap)
 
     Returns
     -------
@@ -376,11 +381,12 @@ def refine(
     centres, radii = _spheres(surfaces)
     for distance in (f * tol for f in levels):
         pairs = [(p, q) for p in range(m) for q in range(m) if p != q and len(surfaces[p].samples)
-                 and len(surfaces[q].samples) and _near(T[p], T[q], p, q, centres, radii, distance)]
+                 and len(surfaces[q].samples) and _near(T[p], T[q], p, q, centres, radii, distance + gap)]
         for _ in range(iterations):
             pts = [transform_points(T[k], s.samples[:n_points]) for k, s in enumerate(surfaces)]
             nrm = [s.sample_normals[:n_points] @ T[k][:3, :3].T for k, s in enumerate(surfaces)]
-            trees = {q: cKDTree(pts[q]) for q in {q for _, q in pairs}}
+            # each source sample is matched to the target's surface moved out by the gap
+            trees = {q: cKDTree(pts[q] + gap * nrm[q]) for q in {q for _, q in pairs}}
             AtA = np.zeros((6 * len(free), 6 * len(free)))
             Atb = np.zeros(6 * len(free))
             rows = 0
@@ -392,7 +398,7 @@ def refine(
                 if not ok.any():
                     continue
                 touching.append((p, q))
-                P, Q, N = pts[p][ok], pts[q][j[ok]], nrm[q][j[ok]]
+                P, Q, N = pts[p][ok], pts[q][j[ok]] + gap * nrm[q][j[ok]], nrm[q][j[ok]]
                 r = np.einsum("ij,ij->i", P - Q, N)
                 blocks = []
                 if p in col:
@@ -429,6 +435,7 @@ def contact_points(
     tol: float,
     normal_angle: float = 30.0,
     count: int = 40,
+    gap: float = 0.0,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Where each contact of the assembly touches: point pairs for pictures and reports.
 
@@ -445,7 +452,7 @@ def contact_points(
             scenes[c.b] = make_scene(*meshes[c.b])
         T_b_a = invert_transform(assembly.T_group_fragment[c.b]) @ assembly.T_group_fragment[c.a]
         touching, closest = touching_samples(surfaces[c.a], surfaces[c.b], T_b_a, target_scene=scenes[c.b], tol=tol,
-                                             normal_angle=normal_angle)
+                                             normal_angle=normal_angle, gap=gap)
         points_a = surfaces[c.a].samples[touching]
         keep = farthest_points(points_a, count)
         out.append((points_a[keep], closest[keep]))

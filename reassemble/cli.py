@@ -68,6 +68,18 @@ def _bytes(text: str) -> float:
         raise argparse.ArgumentTypeError(f"not a size (e.g. 4G, 500M): {text!r}") from None
 
 
+def _gap(text: str) -> float | None:
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 <= value < 0.5:  # also refuses nan
+        raise argparse.ArgumentTypeError(f"not 'auto' or a fraction in [0, 0.5): {text!r}")
+    return value
+
+
 def _cmd_describe(args: argparse.Namespace) -> int:
     from .descriptors import DescriptorParams
     from .pipeline import describe_to_file
@@ -127,7 +139,7 @@ def _cmd_match(args: argparse.Namespace) -> int:
     from .pipeline import MatchConfig, match_to_folder
 
     summary = match_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                              config=MatchConfig(max_memory=args.max_memory), jobs=_jobs(args),
+                              config=MatchConfig(max_memory=args.max_memory, gap=args.gap), jobs=_jobs(args),
                               progress=not args.quiet)
     print(f"{summary['fragments']} fragments, {summary['pairs']} pairs, {summary['touching']} touching:")
     for p in summary["pair_list"]:
@@ -161,7 +173,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .pipeline import MatchConfig, run_to_folder
 
     report = run_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                           config=MatchConfig(max_memory=args.max_memory), jobs=_jobs(args), progress=not args.quiet)
+                           config=MatchConfig(max_memory=args.max_memory, gap=args.gap), jobs=_jobs(args), progress=not args.quiet)
     _print_run(report, args.out)
     if args.render or args.viewer:
         _view(args.out, render=args.render, viewer=args.viewer, progress=not args.quiet)
@@ -310,6 +322,9 @@ def _add_inputs(p) -> None:
     p.add_argument("--max-memory", type=_bytes, default=4e9,
                    help="working memory one fragment's descriptor grid may take, e.g. 4G (default); a fragment "
                    "that needs more is left out with a note")
+    p.add_argument("--gap", type=_gap, default=None,
+                   help="how far apart mating fracture surfaces are (material lost at the break), a fraction of "
+                   "the median fragment's bounding-box diagonal; 'auto' (default): measured from the pairs")
     _add_common(p)
 
 

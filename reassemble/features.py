@@ -9,6 +9,7 @@ signature a mating point should have.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +45,16 @@ class FractureSurface:
     surface_area: float
     fracture_area: float
     area: float
+
+
+def offset_surface(surface: FractureSurface, distance: float) -> FractureSurface:
+    """``surface`` with its fracture samples and keypoints moved ``distance`` out along their
+    normals: where a mate's surface lies when the two are ``distance`` apart. Signatures,
+    normals and the whole-surface samples (for penetration) are unchanged."""
+    if distance == 0.0:
+        return surface
+    return dataclasses.replace(surface, samples=surface.samples + distance * surface.sample_normals,
+                               keypoints=surface.keypoints + distance * surface.keypoint_normals)
 
 
 def signature(descriptors) -> np.ndarray:

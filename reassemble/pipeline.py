@@ -202,12 +202,15 @@ class MatchConfig:
     samples : fracture and surface samples per fragment (ICP, contact, penetration)
     max_memory : bytes of working memory one fragment's descriptor grid may take; a
         fragment that needs more is left out with a note naming ``--max-memory``
+    gap : how far apart mating fracture surfaces are (material lost at the break); None:
+        measured from the pairs (:func:`match_set`)
     """
 
     radii: tuple[float, ...] = (0.02, 0.04, 0.08)
     keypoint_spacing: float = 0.015
     samples: int = 4000
     max_memory: float = 4e9
+    gap: float | None = None
 
 
 @dataclasses.dataclass
@@ -389,6 +392,39 @@ def match_pairs(
     return results
 
 
+def match_set(
+    fragments: list[PreparedFragment], *, size: float, params, gap: float | None = None, seed: int = 0,
+    jobs: int = 1, progress: bool = False,
+):
+    """Register every pair, with the separation of mating surfaces measured or given.
+
+    With ``gap`` None, the pairs are registered touching, the separation of the touching
+    ones measured (:func:`registration.set_gap`), and when it exceeds the contact
+    tolerance (plain contacts would close it, shifting every piece by it and counting
+    rough surfaces as interpenetrating), every pair is registered again that far apart.
+
+    Returns
+    -------
+    results : (source, target) -> PairResult
+    params : the RegistrationParams used, ``gap`` resolved (fraction of ``size``)
+    """
+    import dataclasses
+
+    from .registration import set_gap
+
+    if gap is not None:
+        params = dataclasses.replace(params, gap=float(gap))
+    results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs, progress=progress)
+    if gap is None:
+        measured = set_gap([f.surface for f in fragments], results, size=size, params=params)
+        if measured > params.tolerance:
+            log.info("mating surfaces are %.3g x size apart (material lost at the break?): matching again with "
+                     "that gap", measured)
+            params = dataclasses.replace(params, gap=measured)
+            results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs, progress=progress)
+    return results, params
+
+
 def load_fragments(inputs: list[str | Path]) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:
     """Read fragment meshes from files and folders; a bad file is skipped with a warning.
 
@@ -514,7 +550,8 @@ def match_to_folder(
     frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,
                                      progress=progress)
     reg_params = registration_params(frags, size=size, params=RegistrationParams())
-    results = match_pairs(frags, size=size, params=reg_params, seed=seed, jobs=jobs, progress=progress)
+    results, reg_params = match_set(frags, size=size, params=reg_params, gap=config.gap, seed=seed, jobs=jobs,
+                                    progress=progress)
     pairs = _pairs_json(frags, results)
     with staged_directory(out, force=force) as tmp:
         write_json(tmp / "pairs.json", {"format": "reassemble-pairs/1", "convention": "T_target_source",
@@ -565,7 +602,8 @@ def run_to_folder(
                                      progress=progress)
     reg_params = registration_params(frags, size=size, params=RegistrationParams())
     t1 = time.perf_counter()
-    results = match_pairs(frags, size=size, params=reg_params, seed=seed, jobs=jobs, progress=progress)
+    results, reg_params = match_set(frags, size=size, params=reg_params, gap=config.gap, seed=seed, jobs=jobs,
+                                    progress=progress)
     t2 = time.perf_counter()
     if progress:
         log.info("assembling %d fragments", len(frags))
@@ -574,7 +612,7 @@ def run_to_folder(
                  reg_params=reg_params, seed=seed)
     T_world = world_poses(A, surfaces, gap=0.1 * size)
     touching = contact_points(A, surfaces, [(f.vertices, f.faces) for f in frags], tol=reg_params.tolerance * size,
-                              normal_angle=reg_params.normal_angle)
+                              normal_angle=reg_params.normal_angle, gap=reg_params.gap * size)
     t3 = time.perf_counter()
     timings.update(prepare=t1 - t0, pairs=t2 - t1, assembly=t3 - t2)
 
@@ -611,6 +649,7 @@ def run_to_folder(
             "sub_assemblies": sum(len(g) > 1 for g in groups), "alone": sum(len(g) == 1 for g in groups),
             "contacts": len(A.contacts),
             "vertex_noise": _round(set_noise(frags) / size), "contact_tolerance": _round(reg_params.tolerance),
+            "gap": _round(reg_params.gap),
             "timings_s": {k: round(v, 2) for k, v in timings.items()},
         },
         "groups": groups,

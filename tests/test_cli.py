@@ -88,6 +88,9 @@ def test_bad_options(tmp_path):
     assert_one_line_error(rc, err, "--roughness")
     rc, _, err = run("break", "no_such_mesh", "--pieces", 3, "--out", tmp_path / "o")
     assert_one_line_error(rc, err, "no_such_mesh", "bundled")
+    for bad in ("-0.1", "nan", "wide"):
+        rc, _, err = run("run", tmp_path, "--gap", bad, "--out", tmp_path / "o")
+        assert_one_line_error(rc, err, "--gap", "auto")
     assert not (tmp_path / "o").exists()
 
 

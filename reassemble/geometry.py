@@ -180,6 +180,34 @@ def vertex_noise(vertices: np.ndarray, *, neighbours: int = 16, percentile: floa
     return float(np.percentile(np.concatenate(rms), percentile))
 
 
+def taubin_smooth(vertices: np.ndarray, faces: np.ndarray, iterations: int) -> np.ndarray:
+    """(n, 3) vertices after ``iterations`` of Taubin smoothing (no shrinkage), a new array."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(np.array(vertices, dtype=np.float64, copy=True), faces, process=False)
+    if iterations > 0:
+        trimesh.smoothing.filter_taubin(mesh, lamb=0.5, nu=0.53, iterations=iterations)
+    return np.asarray(mesh.vertices, dtype=np.float64)
+
+
+def denoise(
+    vertices: np.ndarray, faces: np.ndarray, *, target: float, step: int = 5, max_iterations: int = 40
+) -> tuple[np.ndarray, int]:
+    """Taubin-smooth a mesh, ``step`` iterations at a time, until its measured vertex noise
+    (:func:`vertex_noise`) is at most ``target`` (mesh units) or ``max_iterations`` are done.
+
+    Returns
+    -------
+    vertices : (n, 3) smoothed vertices (a new array; the faces are unchanged)
+    iterations : int, how many were applied
+    """
+    v, done = np.array(vertices, dtype=np.float64, copy=True), 0
+    while done < max_iterations and vertex_noise(v) > target:
+        v = taubin_smooth(v, faces, step)
+        done += step
+    return v, done
+
+
 def decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int) -> tuple[np.ndarray, np.ndarray]:
     """(vertices, faces) simplified to about ``target_faces`` triangles (quadric error
     decimation, Open3D); the mesh itself when it has no more than that. New arrays."""

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import connected_components, face_adjacency, face_areas, face_normals, sample_surface
+from .geometry import connected_components, face_adjacency, face_areas, face_normals, sample_surface, taubin_smooth
 
 
 EXACT_QUADRIC = 1e-6  # relative RMS residual below which a patch is a quadric up to rounding
@@ -179,15 +179,6 @@ def _share(segmentations: list[Segmentation]) -> float:
     return sum(s.fracture_area for s in segmentations) / max(sum(s.area for s in segmentations), 1e-300)
 
 
-def _smoothed(vertices: np.ndarray, faces: np.ndarray, iterations: int) -> np.ndarray:
-    """Vertices after Taubin smoothing (no shrinkage), a new array."""
-    import trimesh
-
-    mesh = trimesh.Trimesh(vertices.copy(), faces, process=False)
-    trimesh.smoothing.filter_taubin(mesh, lamb=0.5, nu=0.53, iterations=iterations)
-    return np.asarray(mesh.vertices, dtype=np.float64)
-
-
 def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: int, smoothing: int) -> list[Segmentation]:
     """One segmentation pass; with ``smoothing`` > 0 patches, face normals and quadric fits
     come from Taubin-smoothed vertices (areas from the given ones)."""
@@ -197,7 +188,7 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
     frags = []
     for (given, faces), d in zip(meshes, descriptors):
         given, faces = np.asarray(given, float), np.asarray(faces, np.int64)
-        vertices = _smoothed(given, faces, smoothing) if smoothing else given
+        vertices = taubin_smooth(given, faces, smoothing) if smoothing else given
         patch, pairs, dihedral = make_patches(vertices, faces, size=size, params=params)
         n_patches = int(patch.max()) + 1
         area = face_areas(given, faces)

@@ -131,6 +131,19 @@ def test_vertex_noise_estimates_added_noise_and_sets_the_tolerance(rng):
     assert with_noise(default, noise=0.005, size=10.0).tolerance == default.tolerance  # relative to the size
 
 
+def test_denoise_smooths_until_the_noise_is_down(rng):
+    from reassemble.geometry import denoise, vertex_noise
+
+    noisy, faces = _sphere(rng, 0.02)  # a quarter of the edge length: the 0.5 % noise sets
+    before = noisy.copy()
+    smoothed, iterations = denoise(noisy, faces, target=0.005)
+    assert np.array_equal(noisy, before)
+    assert 0 < iterations <= 40 and vertex_noise(smoothed) <= 0.005
+    assert abs(np.linalg.norm(smoothed, axis=1).mean() - 1.0) < 0.01  # Taubin: the sphere does not shrink
+    again, none = denoise(smoothed, faces, target=0.005)
+    assert none == 0 and np.array_equal(again, smoothed)
+
+
 @pytest.mark.parametrize("shares, expected", [((0.05, 0.4), 1), ((0.05, 0.03), 0), ((0.3, 0.9), 0)])
 def test_segmentation_retries_on_smoothed_geometry_only_when_the_break_is_a_sliver(monkeypatch, shares, expected):
     import reassemble.segmentation as seg

@@ -12,6 +12,8 @@ geodesic rotation RMSE, solved (every fragment strict-correct). The baseline is 
 tutorial FPFH + RANSAC + ICP on every pair glued by a maximum spanning tree
 (`reassemble.baseline.fpfh_assemble`, voxel 1/40 of the median fragment diagonal),
 scored the same way. Times are wall-clock of the whole run (loading to written files).
+Columns `gap` and `sm`: the separation of mating surfaces `run` used (fraction of the
+size; 0: touching) and the Taubin iterations of the copies it matched on (0: none).
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ def run_puzzle(gt_path: str, baseline: bool, seed: int) -> dict:
         score = evaluate_files(Path(tmp) / "out" / "transforms.json", gt_path)
     out = {"name": gt_path.parent.name, "fragments": report["summary"]["fragments"],
            "placed": report["summary"]["placed"], "time": elapsed, "timings": report["summary"]["timings_s"],
+           "gap": report["summary"]["gap"],
+           "smoothing": max(f["smoothing_iterations"] for f in report["fragments"].values()),
            "ours": score["alignments"][ALIGN]["summary"],
            "rot_errors": [f["rotation_error_deg"] for f in score["alignments"][ALIGN]["fragments"].values()]}
     if baseline:
@@ -73,7 +77,8 @@ def report_puzzle(r: dict) -> None:
     t = r["timings"]
     print(f"{r['name']:<36s} {r['fragments']:>5d} {r['placed']:>6d} {o['part_acc_strict']:>6.3f} {o['part_acc']:>6.3f} "
           f"{o['rot_geodesic_rmse_deg']:>7.2f} {str(o['solved']):>6s} {r['time']:>7.1f} "
-          f"({t['prepare']:.0f}+{t['pairs']:.0f}+{t['assembly']:.0f}) {base}", flush=True)
+          f"({t['prepare']:.0f}+{t['pairs']:.0f}+{t['assembly']:.0f}) {r['gap']:>6.4f} {r['smoothing']:>3d} {base}",
+          flush=True)
 
 
 def summarize(label: str, rs: list[dict]) -> None:
@@ -109,7 +114,7 @@ def main() -> int:
     paths = [str(args.root / s.name / "ground_truth.json") for s in specs]
     print(f"{len(specs)} puzzles; scored anchored on the largest placed fragment")
     print(f"{'puzzle':<36s} {'frags':>5s} {'placed':>6s} {'strict':>6s} {'BB':>6s} {'rot deg':>7s} {'solved':>6s} "
-          f"{'time s':>7s} (prep+pairs+asm) " + ("" if args.no_baseline else
+          f"{'time s':>7s} (prep+pairs+asm) {'gap':>6s} {'sm':>3s} " + ("" if args.no_baseline else
                                               f"{'fpfh st':>7s} {'BB':>6s} {'rot':>7s} {'time':>7s}"))
     t0 = time.perf_counter()
     results = []

@@ -1,11 +1,12 @@
 """Strict part accuracy of `reassemble run` against scan noise and against gaps between pieces.
 
     python benchmarks/robustness.py --jobs 2                                   # the default curves
-    python benchmarks/robustness.py --meshes spot,torus --pieces 8 --noise 0,0.005 --gaps 0 --jobs 2
+    python benchmarks/robustness.py --meshes spot,torus --pieces 8 --noise 0,0.005 --gaps "" --decimate "" --jobs 2
 
 Every mesh is broken (`reassemble break`, the bench set's meshes and seed 0) once per
-setting: vertex noise sigma (fraction of the object diagonal) with no gap, and gaps
-(material lost at the break, mating surfaces that far apart: `break --gap`) with no noise.
+setting: vertex noise sigma (fraction of the object diagonal) with no gap, gaps
+(material lost at the break, mating surfaces that far apart: `break --gap`) with no noise,
+and decimation (`break --decimate`: every fragment simplified to that tolerance).
 Each puzzle is assembled with `run_to_folder` (one process per puzzle) and scored as
 `reassemble eval` does, anchored on the largest placed fragment. Prints a line per
 puzzle, then the curves: mean strict part accuracy and share solved per level.
@@ -34,7 +35,7 @@ def run_one(task) -> dict:
     from reassemble.synth import BreakParams
 
     mesh, pieces, kind, level, seed = task
-    params = BreakParams(pieces=pieces, noise=level if kind == "noise" else 0.0, gap=level if kind == "gap" else 0.0)
+    params = BreakParams(pieces=pieces, **{kind: level})
     with tempfile.TemporaryDirectory() as tmp:
         puzzle = Path(tmp) / "puzzle"
         break_to_folder(mesh, puzzle, params=params, seed=seed)
@@ -53,27 +54,29 @@ def main() -> int:
     parser.add_argument("--pieces", default="4,8")
     parser.add_argument("--noise", default="0,0.001,0.002,0.005", help="noise sigmas / diagonal")
     parser.add_argument("--gaps", default="0.005,0.01,0.02", help="gaps / diagonal")
+    parser.add_argument("--decimate", default="0.002,0.005", help="decimation tolerances / diagonal")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once")
     args = parser.parse_args()
     header()
     tasks = [(m, int(p), kind, float(level), args.seed)
-             for kind, levels in (("noise", args.noise), ("gap", args.gaps)) for level in levels.split(",") if level
+             for kind, levels in (("noise", args.noise), ("gap", args.gaps), ("decimate", args.decimate))
+             for level in levels.split(",") if level
              for p in args.pieces.split(",") for m in args.meshes.split(",")]
-    print(f"{'mesh':<22s} {'pieces':>6s} {'kind':>5s} {'level':>6s} {'strict':>6s} {'solved':>6s} {'rot deg':>8s} "
+    print(f"{'mesh':<22s} {'pieces':>6s} {'kind':>8s} {'level':>6s} {'strict':>6s} {'solved':>6s} {'rot deg':>8s} "
           f"{'time s':>7s}", flush=True)
     rows = []
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         for r in pool.map(run_one, tasks):
             rows.append(r)
-            print(f"{r['mesh']:<22s} {r['pieces']:>6d} {r['kind']:>5s} {r['level']:>6g} {r['strict']:>6.3f} "
+            print(f"{r['mesh']:<22s} {r['pieces']:>6d} {r['kind']:>8s} {r['level']:>6g} {r['strict']:>6.3f} "
                   f"{str(r['solved']):>6s} {r['rot']:>8.2f} {r['time']:>7.1f}", flush=True)
     print(f"\ncurves (mean over {len(args.meshes.split(','))} meshes x pieces {args.pieces}):")
-    for kind in ("noise", "gap"):
+    for kind in ("noise", "gap", "decimate"):
         for level in sorted({r["level"] for r in rows if r["kind"] == kind}):
             sel = [r for r in rows if r["kind"] == kind and r["level"] == level]
-            print(f"  {kind} {level:>6g} of the diagonal: strict {np.mean([r['strict'] for r in sel]):.3f}, "
+            print(f"  {kind:>8s} {level:>6g} of the diagonal: strict {np.mean([r['strict'] for r in sel]):.3f}, "
                   f"solved {np.mean([r['solved'] for r in sel]):.3f} ({len(sel)} puzzles)")
     print(f"total {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")
     return 0

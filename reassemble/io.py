@@ -76,7 +76,8 @@ def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: boo
     Parameters
     ----------
     path : a .ply .obj .stl .off .glb or .gltf file
-    require_closed : refuse meshes with boundary or non-manifold edges
+    require_closed : refuse meshes that do not bound a solid: boundary edges, edges of an
+        odd number of faces, inconsistent orientation (pinched edges of four faces pass)
     weld : weld and clean as above; ``False`` keeps vertices and faces exactly as stored
         (for files whose per-face data must stay aligned, such as puzzle fragments)
 
@@ -123,21 +124,26 @@ def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: boo
             raise ReassembleError(f"{path}: all triangles are degenerate")
 
     if require_closed:
-        edges = np.sort(mesh.edges, axis=1)
-        _, counts = np.unique(edges, axis=0, return_counts=True)
+        # a solid's surface: every edge crossed as often in one direction as in the other.
+        # Edges where four faces meet (two sheets pinched together, as decimation leaves)
+        # pass: inside and outside stay well defined; a hole or a flipped face does not
+        directed = mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        key, sign = np.sort(directed, axis=1), np.where(directed[:, 0] < directed[:, 1], 1, -1)
+        edges, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        balance = np.bincount(inverse.ravel(), sign, len(edges))
         n_open = int(np.sum(counts == 1))
-        n_nonmanifold = int(np.sum(counts > 2))
-        if n_open or n_nonmanifold:
+        n_odd = int(np.sum((counts > 1) & (counts % 2 == 1)))
+        if n_open or n_odd:
             what = []
             if n_open:
                 what.append(f"{n_open} boundary edges")
-            if n_nonmanifold:
-                what.append(f"{n_nonmanifold} non-manifold edges")
+            if n_odd:
+                what.append(f"{n_odd} edges shared by an odd number of faces")
             raise ReassembleError(
-                f"{path}: mesh is not a closed manifold after welding ({', '.join(what)}); "
+                f"{path}: mesh is not closed after welding ({', '.join(what)}); "
                 "a watertight solid is needed: fill its holes first (open scans are not supported yet)"
             )
-        if not mesh.is_winding_consistent:
+        if np.any(balance != 0):
             raise ReassembleError(f"{path}: inconsistent face orientation (not an oriented solid)")
         if mesh.volume < 0:
             mesh.invert()

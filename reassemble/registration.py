@@ -12,7 +12,7 @@
    penetration count; the best few refined by point-to-plane ICP between the two fracture
    surfaces, on pairs with opposed normals only;
 4. every candidate scored by contact (source fracture area within a tolerance of the
-   target, normals opposed) minus interpenetration (surface area of either fragment that
+   target, or of the gap between them when material was lost at the break, normals opposed) minus interpenetration (surface area of either fragment that
    lies inside the other, from Open3D signed distances), over the smaller fragment's area.
 
 Transforms are ``T_target_source``: they map source coordinates into the target's frame.
@@ -51,7 +51,7 @@ class RegistrationParams:
         the gap between two surfaces with the set's vertex noise (:func:`with_noise`)
     gap : mating surfaces are this far apart (material lost at the break: worn or chipped
         edges, a scan that missed a layer); contact is counted at this distance, within
-        ``tolerance``, and ICP keeps it (:func:`estimate_gap` finds it from the data)
+        ``tolerance``, and ICP keeps it (:func:`set_gap` measures it from the data)
     """
 
     tolerance: float = 0.006
@@ -296,14 +296,15 @@ def estimate_gap(
                 tree=None, n_points=None, max_gap=max_gap)
 
 
-def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_points, max_gap, gap=0.0):
-    """(T, gap): point-to-plane ICP; when ``max_gap`` > 0 the separation (from ``gap``) is a
-    7th unknown, and the source is matched against the target's samples moved out by the
+def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_points, max_gap):
+    """(T, gap): point-to-plane ICP; when ``max_gap`` > 0 the separation (from 0) is a 7th
+    unknown, and the source is matched against the target's samples moved out by the
     current separation (nearest points across a wide gap land on the bumps of a rough
     surface, which biased the fit: measured 0.019 instead of 0.033 x size from the truth)."""
     from scipy.spatial import cKDTree
 
-    tree = tree if tree is not None and max_gap == 0 else cKDTree(target.samples + gap * target.sample_normals)
+    tree = tree if tree is not None and max_gap == 0 else cKDTree(target.samples)
+    gap = 0.0
     cos_tol = np.cos(np.radians(normal_angle))
     T = np.array(T, dtype=float, copy=True)
     src, src_n = source.samples[:n_points], source.sample_normals[:n_points]

@@ -63,7 +63,7 @@ def test_mixed_folder_is_handled_as_documented(mixed):
     assert "Traceback" not in err
     report = json.loads((out / "report.json").read_text())
     warnings = report["warnings"]
-    expect = {"empty.ply": "empty", "random.ply": "cannot read", "nan.ply": "NaN", "open.stl": "not a closed manifold",
+    expect = {"empty.ply": "empty", "random.ply": "cannot read", "nan.ply": "NaN", "open.stl": "not closed",
               "twin.ply": "skipped", "pair.ply": "2 separate bodies"}
     for name, words in expect.items():
         assert any(name in w and words in w for w in warnings), (name, warnings)

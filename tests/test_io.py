@@ -76,8 +76,21 @@ def test_non_manifold_and_degenerate_faces(tmp_path):
     both = trimesh.util.concatenate([a, b])
     both.merge_vertices()
     both.export(tmp_path / "bowtie.ply")
-    with pytest.raises(ReassembleError, match="non-manifold"):
-        load_mesh(tmp_path / "bowtie.ply")
+    pinched = load_mesh(tmp_path / "bowtie.ply")  # still bounds a solid, as decimation leaves them
+    assert trimesh.Trimesh(pinched.vertices, pinched.faces).volume == pytest.approx(2.0)
+    # a fin: one extra triangle on an edge of the cube, three faces there
+    box = trimesh.creation.box()
+    fin = np.vstack([box.vertices, [[2.0, 2.0, 2.0]]])
+    e = box.edges_unique[0]
+    trimesh.Trimesh(fin, np.vstack([box.faces, [[e[0], e[1], 8]]]), process=False).export(tmp_path / "fin.ply")
+    with pytest.raises(ReassembleError, match="odd number of faces"):
+        load_mesh(tmp_path / "fin.ply")
+    # one face flipped: closed, but not an oriented solid
+    flipped = box.faces.copy()
+    flipped[0] = flipped[0, ::-1]
+    trimesh.Trimesh(box.vertices, flipped, process=False).export(tmp_path / "flipped.ply")
+    with pytest.raises(ReassembleError, match="orientation"):
+        load_mesh(tmp_path / "flipped.ply")
     # a collapsed face (repeated vertex) and a duplicate face are dropped, the solid stays closed
     box = trimesh.creation.box()
     faces = np.vstack([box.faces, [[0, 0, 1]], box.faces[:1]])

@@ -74,8 +74,8 @@ def _gap(text: str) -> float | None:
     try:
         value = float(text)
     except ValueError:
-        value = -1.0
-    if not 0.0 <= value < 0.5:  # also refuses nan
+        value = float("nan")
+    if not 0.0 <= value < 0.5:  # nan fails it too
         raise argparse.ArgumentTypeError(f"not 'auto' or a fraction in [0, 0.5): {text!r}")
     return value
 
@@ -173,7 +173,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .pipeline import MatchConfig, run_to_folder
 
     report = run_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                           config=MatchConfig(max_memory=args.max_memory, gap=args.gap), jobs=_jobs(args), progress=not args.quiet)
+                           config=MatchConfig(max_memory=args.max_memory, gap=args.gap), jobs=_jobs(args),
+                           progress=not args.quiet)
     _print_run(report, args.out)
     if args.render or args.viewer:
         _view(args.out, render=args.render, viewer=args.viewer, progress=not args.quiet)

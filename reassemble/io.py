@@ -129,8 +129,8 @@ def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: boo
         # pass: inside and outside stay well defined; a hole or a flipped face does not
         directed = mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
         key, sign = np.sort(directed, axis=1), np.where(directed[:, 0] < directed[:, 1], 1, -1)
-        edges, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-        balance = np.bincount(inverse.ravel(), sign, len(edges))
+        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        balance = np.bincount(inverse.ravel(), sign, len(counts))
         n_open = int(np.sum(counts == 1))
         n_odd = int(np.sum((counts > 1) & (counts % 2 == 1)))
         if n_open or n_odd:

@@ -215,6 +215,8 @@ def group_surface(
         surface_area=surface_area,
         fracture_area=float(sum(f.sum() * s.sample_area for f, s in zip(free_samples, surfaces))),
         area=float(sum(s.area for s in surfaces)),
+        keypoint_tangents=None if any(s.keypoint_tangents is None for s in surfaces) else np.vstack(
+            [s.keypoint_tangents[free_keys[k]] @ R[k].T for k, s in enumerate(surfaces)]),
     )
 
 

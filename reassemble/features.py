@@ -33,6 +33,8 @@ class FractureSurface:
     surface : (p, 3) area-uniform samples of the whole surface (for penetration)
     surface_area : float, whole-surface area each of those stands for
     fracture_area, area : float
+    keypoint_tangents : (k, 3) break tangents at the keypoints of a thin-walled fragment
+        (:func:`shells.strip_frames`; sign arbitrary), None for solids
     """
 
     keypoints: np.ndarray
@@ -45,6 +47,7 @@ class FractureSurface:
     surface_area: float
     fracture_area: float
     area: float
+    keypoint_tangents: np.ndarray | None = None
 
 
 def offset_surface(surface: FractureSurface, distance: float) -> FractureSurface:

@@ -231,6 +231,7 @@ class PreparedFragment:
     noise: float = 0.0  # vertex noise sigma of ``vertices``, mesh units (geometry.vertex_noise)
     smoothing: int = 0  # Taubin iterations of the copy matched (0: ``vertices`` themselves)
     matched: np.ndarray | None = None  # (n, 3) the smoothed copy's vertices, when smoothing
+    shell: bool = False  # matched as a thin-walled sherd, along its break strip (shells.py)
 
     @property
     def mesh(self) -> tuple[np.ndarray, np.ndarray]:
@@ -316,6 +317,7 @@ def prepare_fragments(
     from .segmentation import SegmentParams, Segmentation, segment
 
     from .geometry import vertex_noise
+    from .shells import is_thin_shell, strip_frames, strip_segmentation, wall_thickness
 
     names = sorted(meshes)
     pairs = [meshes[n] for n in names]
@@ -345,25 +347,38 @@ def prepare_fragments(
         raise ReassembleError(f"none of the {len(names)} fragments could be matched; "
                               f"{names[0]}: {notes[names[0]].removeprefix('not matched: ')}")
     segs = [None] * len(names)
-    for k, s in zip(good, segment([(matched[k], pairs[k][1]) for k in good], [descriptors[k] for k in good],
-                                  size=size, params=segment_params or SegmentParams(), seed=seed)):
-        segs[k] = s
+    thickness = {k: wall_thickness(matched[k], pairs[k][1]) for k in good}
+    shell = 2 * sum(is_thin_shell(matched[k], pairs[k][1], thickness[k]) for k in good) > len(good)
+    if shell:
+        log.info("thin-walled fragments (sherds): matched along their break strips")
+        for k in good:
+            segs[k] = strip_segmentation(matched[k], pairs[k][1], thickness[k])
+    else:
+        for k, s in zip(good, segment([(matched[k], pairs[k][1]) for k in good], [descriptors[k] for k in good],
+                                      size=size, params=segment_params or SegmentParams(), seed=seed)):
+            segs[k] = s
+    # on sherds one keypoint pair is a hypothesis: the cost grows as the product of the
+    # keypoint counts (vessel set at the solids' spacing: ~700 per sherd, 140 s for its 10 pairs)
+    spacing = config.keypoint_spacing * size * (2.0 if shell else 1.0)
     rngs = np.random.default_rng(seed).spawn(len(names))
     out = []
-    for name, (given, f), v, d, s, rng, sigma in zip(names, pairs, matched, descriptors, segs, rngs, noise):
+    for k, (name, (given, f), v, d, s, rng, sigma) in enumerate(zip(names, pairs, matched, descriptors, segs, rngs,
+                                                                  noise)):
         if s is None:
             s = Segmentation(np.zeros(len(f), bool), np.zeros(len(f)), np.zeros(len(f), int),
                              np.full(len(f), -1), 0.0, float(face_areas(v, f).sum()))
             surf = empty_surface(v, f, n_radii=len(radii), n_samples=config.samples, rng=rng)
             log.warning("%s: %s", name, notes[name])
         else:
-            surf = fracture_surface(v, f, s, d, spacing=config.keypoint_spacing * size,
-                                    n_samples=config.samples, rng=rng)
+            surf = fracture_surface(v, f, s, d, spacing=spacing, n_samples=config.samples, rng=rng)
+            if shell and len(surf.keypoints):
+                n, t = strip_frames(v, f, thickness[k], surf.keypoints, surf.keypoint_normals)
+                surf = dataclasses.replace(surf, keypoint_normals=n, keypoint_tangents=t)
             if surf.fracture_area == 0.0:
                 notes[name] = "no fracture surface found; it can only be placed by others"
                 log.warning("%s: %s", name, notes[name])
         out.append(PreparedFragment(name, given, f, d, s, surf, notes.get(name, ""), sigma, smoothing,
-                                    v if smoothing else None))
+                                    v if smoothing else None, shell))
     return out, size
 
 
@@ -377,7 +392,12 @@ def registration_params(fragments: list[PreparedFragment], *, size: float, param
     ``RegistrationParams()``) with the contact tolerance raised to cover its vertex noise."""
     from .registration import RegistrationParams, with_noise
 
-    return with_noise(params or RegistrationParams(), noise=set_noise(fragments), size=size)
+    params = with_noise(params or RegistrationParams(), noise=set_noise(fragments), size=size)
+    if fragments and all(f.shell for f in fragments):
+        # one-point hypotheses on strips are many and their local consensus weak (a break
+        # curve matches any curve over a short stretch): more of them go on to ICP
+        params = dataclasses.replace(params, shortlist=100, consensus_pool=2000)
+    return params
 
 
 def _pair_worker_init(surfaces, meshes, size, params) -> None:
@@ -686,7 +706,7 @@ def run_to_folder(
             "sub_assemblies": sum(len(g) > 1 for g in groups), "alone": sum(len(g) == 1 for g in groups),
             "contacts": len(A.contacts),
             "vertex_noise": _round(set_noise(frags) / size), "contact_tolerance": _round(reg_params.tolerance),
-            "gap": _round(reg_params.gap),
+            "gap": _round(reg_params.gap), "thin_walled": bool(frags) and all(f.shell for f in frags),
             "timings_s": {k: round(v, 2) for k, v in timings.items()},
         },
         "groups": groups,

@@ -49,6 +49,7 @@ class RegistrationParams:
     min_score : below it the verdict is "these two do not touch"
     noise_tolerance : the contact tolerance is at least this many standard deviations of
         the gap between two surfaces with the set's vertex noise (:func:`with_noise`)
+    consensus_pool : hypotheses kept after the first, coarse consensus count for the finer one
     gap : mating surfaces are this far apart (material lost at the break: worn or chipped
         edges, a scan that missed a layer); contact is counted at this distance, within
         ``tolerance``, and ICP keeps it (:func:`set_gap` measures it from the data)
@@ -66,6 +67,7 @@ class RegistrationParams:
     penetration_weight: float = 2.0
     min_score: float = 0.02
     noise_tolerance: float = 2.5
+    consensus_pool: int = 300
     gap: float = 0.0
 
 
@@ -207,13 +209,60 @@ def ransac(
     # better than chance overlaps of the rest (measured: every such pair lost)
     anchors = pairs[pick[idx[facing], 0], 0]
     hoods = _neighbourhoods(source.keypoints, anchors, 2.0 * radius)
-    tree = cKDTree(target.keypoints)
-    inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, 64, rng), tol=tol, cos_tol=cos_tol)
-    top = np.argsort(-inliers, kind="stable")[:300]
+    return _consensus(T, anchors, source, target, cKDTree(target.keypoints), hoods, tol=tol, cos_tol=cos_tol,
+                      params=params, first=64, rng=rng)
+
+
+def _consensus(T, anchors, source, target, tree, hoods, *, tol, cos_tol, params, first: int, rng):
+    """Hypotheses ranked by probe inliers around their anchors: ``first`` probes for all,
+    256 for the best ``params.consensus_pool``; (h, 4, 4) and (h,), best first."""
+    inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, first, rng), tol=tol, cos_tol=cos_tol)
+    top = np.argsort(-inliers, kind="stable")[: params.consensus_pool]
     T, anchors = T[top], anchors[top]
     inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, 256, rng), tol=tol, cos_tol=cos_tol)
     best = np.argsort(-inliers, kind="stable")
     return T[best], inliers[best]
+
+
+def frame_hypotheses(
+    source: FractureSurface,
+    target: FractureSurface,
+    *,
+    tol: float,
+    radius: float,
+    params: RegistrationParams,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Hypotheses of two thin-walled fragments from single keypoint pairs: (h, 4, 4), (h,), best first.
+
+    A strip keypoint's frame (strip normal n, break tangent t: :func:`shells.strip_frames`)
+    fixes a rigid motion from one correspondence: n onto the mate's -n, t onto its +t or -t.
+    Every source keypoint is tried against every target keypoint, both ways round (strip
+    signatures do not discriminate: the descriptor balls are wider than the wall), and the
+    hypotheses ranked by probe inliers that also agree in the tangent.
+    """
+    from scipy.spatial import cKDTree
+
+    ns, ts = source.keypoint_normals, source.keypoint_tangents
+    nt, tt = target.keypoint_normals, target.keypoint_tangents
+    # beyond ``params.hypotheses`` (both signs), a random subset of the source keypoints anchors
+    keep = np.arange(len(ns))
+    if 2 * len(ns) * len(nt) > params.hypotheses:
+        keep = np.sort(rng.choice(len(ns), max(1, params.hypotheses // (2 * len(nt))), replace=False))
+    a, b = (g.ravel() for g in np.meshgrid(keep, np.arange(len(nt)), indexing="ij"))
+    frame_s = np.stack([ns[a], ts[a], np.cross(ns[a], ts[a])], axis=2)  # columns n, t, n x t
+    T = []
+    for sign in (1.0, -1.0):
+        n2, t2 = -nt[b], sign * tt[b]
+        R = np.einsum("hij,hkj->hik", np.stack([n2, t2, np.cross(n2, t2)], axis=2), frame_s)
+        Tk = np.tile(np.eye(4), (len(a), 1, 1))
+        Tk[:, :3, :3] = R
+        Tk[:, :3, 3] = target.keypoints[b] - np.einsum("hij,hj->hi", R, source.keypoints[a])
+        T.append(Tk)
+    T, anchors = np.concatenate(T), np.concatenate([a, a])
+    hoods = _neighbourhoods(source.keypoints, anchors, 2.0 * radius)
+    return _consensus(T, anchors, source, target, cKDTree(target.keypoints), hoods, tol=tol,
+                      cos_tol=np.cos(np.radians(params.normal_angle)), params=params, first=32, rng=rng)
 
 
 def _neighbourhoods(points: np.ndarray, anchors: np.ndarray, radius: float) -> dict[int, np.ndarray]:
@@ -238,7 +287,7 @@ def _draw(hoods: dict[int, np.ndarray], anchors: np.ndarray, m: int, rng: np.ran
 
 def _inliers(T, source, target, tree, probes, *, tol: float, cos_tol: float) -> np.ndarray:
     """(h,) how many of each hypothesis' probe keypoints (h, m) land within ``tol`` of a
-    target keypoint with opposed normals."""
+    target keypoint with opposed normals (and, on thin walls, parallel break tangents)."""
     p, n = source.keypoints[probes], source.keypoint_normals[probes]
     moved = np.einsum("hij,hkj->hki", T[:, :3, :3], p) + T[:, None, :3, 3]
     turned = np.einsum("hij,hkj->hki", T[:, :3, :3], n)
@@ -246,6 +295,10 @@ def _inliers(T, source, target, tree, probes, *, tol: float, cos_tol: float) -> 
     hit = np.isfinite(dist)
     opposed = np.zeros_like(hit)
     opposed[hit] = np.einsum("ij,ij->i", turned.reshape(-1, 3)[hit], target.keypoint_normals[near[hit]]) < -cos_tol
+    if source.keypoint_tangents is not None and target.keypoint_tangents is not None:
+        tangent = np.einsum("hij,hkj->hki", T[:, :3, :3], source.keypoint_tangents[probes]).reshape(-1, 3)
+        opposed[opposed] = np.abs(np.einsum("ij,ij->i", tangent[opposed],
+                                            target.keypoint_tangents[near[opposed]])) > cos_tol
     return opposed.reshape(len(T), -1).sum(axis=1)
 
 
@@ -497,7 +550,12 @@ def register_pair(
     # and the mesh for penetration, stay the target's own)
     target = offset_surface(target, gap)
     pairs = correspondences(source, target, neighbours=params.neighbours)
-    T, inliers = ransac(source, target, pairs, tol=rtol, radius=params.pair_radius * size, params=params, rng=rng)
+    if source.keypoint_tangents is not None and target.keypoint_tangents is not None:
+        T, inliers = frame_hypotheses(source, target, tol=rtol, radius=params.pair_radius * size, params=params,
+                                      rng=rng)
+    else:
+        T, inliers = ransac(source, target, pairs, tol=rtol, radius=params.pair_radius * size, params=params,
+                            rng=rng)
     candidates = []
     # a shortlist gets a quick coarse ICP on a thousand samples and a quick contact count;
     # the best of those the full ICP and score (the true pose of a small contact ranked
@@ -543,6 +601,6 @@ def register_pair(
 
 
 __all__ = [
-    "Candidate", "PairResult", "RegistrationParams", "contact_score", "correspondences", "estimate_gap", "icp",
+    "Candidate", "PairResult", "RegistrationParams", "contact_score", "correspondences", "estimate_gap", "frame_hypotheses", "icp",
     "kabsch", "ransac", "register_pair", "set_gap", "touching_samples", "with_noise",
 ]

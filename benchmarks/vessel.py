@@ -9,6 +9,11 @@ reassembled with ``reassemble run``, and scored as ``reassemble eval`` does: str
 accuracy (mean surface distance < 1 % of the object's diagonal), Breaking Bad part accuracy,
 rotation errors, anchored on the largest placed fragment. Prints per fragment the
 rotation and the mean distance from its true place.
+
+With ``--diagnose``, also what the geometry says about the gaps between the pieces: the
+mean displacement of each piece from its true place against the largest; the separation
+``estimate_gap`` reads for every touching pair when started at the true pose; and the
+contact and interpenetration of the assembled set refined jointly with a given gap kept.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--gap", type=float, default=None, help="as run --gap (default: measured)")
+    parser.add_argument("--diagnose", action="store_true", help="what the geometry says about the gaps")
     args = parser.parse_args()
     header()
     from reassemble.geometry import invert_transform, make_transform, random_rotation, transform_points
@@ -75,7 +81,50 @@ def main() -> int:
           f"run {elapsed:.1f} s (--jobs {args.jobs})")
     b = scores["alignments"]["best_anchor"]
     print(f"anchored on the best fragment instead ({b['anchor']}): strict part acc {b['summary']['part_acc_strict']:.3f}")
+    if args.diagnose:
+        diagnose({n: (m.vertices, m.faces) for n, m in meshes.items()}, size=size, seed=args.seed, jobs=args.jobs)
     return 0
+
+
+def diagnose(meshes: dict, *, size: float, seed: int, jobs: int) -> None:
+    """The gap study, on the pieces in their given (assembled) pose."""
+    from reassemble.assembly import AssemblyParams, _evaluate, _spheres, assemble, refine
+    from reassemble.geometry import invert_transform, make_scene, transform_points
+    from reassemble.pipeline import match_pairs, prepare_fragments, registration_params
+    from reassemble.registration import estimate_gap
+    from scipy.spatial import cKDTree
+
+    frags, ref = prepare_fragments(meshes, seed=seed, jobs=jobs)
+    params = registration_params(frags, size=ref)
+    results = match_pairs(frags, size=ref, params=params, seed=seed, jobs=jobs)
+    surfaces = [f.surface for f in frags]
+    A = assemble(surfaces, [f.mesh for f in frags], results, size=ref, params=AssemblyParams(), reg_params=params,
+                 seed=seed)
+    tol = params.tolerance * ref
+    anchor = int(np.argmax([s.area for s in surfaces]))
+    print(f"displacement from the true place against {frags[anchor].name} (mesh units; diagonal {size:.3g}):")
+    for k, f in enumerate(frags):
+        T = invert_transform(A.T_group_fragment[anchor]) @ A.T_group_fragment[k]
+        print(f"  {f.name:<20s} {np.round((transform_points(T, f.vertices) - f.vertices).mean(axis=0), 3)}")
+    print("estimate_gap started at the true pose, touching pairs (mesh units; strip samples within 4 % of the size):")
+    for (i, j), res in sorted(results.items()):
+        if res.touching:
+            _, g = estimate_gap(surfaces[i], surfaces[j], np.eye(4), tol=tol, max_gap=0.08 * ref,
+                                normal_angle=params.normal_angle)
+            d = cKDTree(surfaces[j].samples).query(surfaces[i].samples, distance_upper_bound=0.04 * ref)[0]
+            print(f"  {frags[i].name} - {frags[j].name}: {g:.3f} (the strips' median distance there: "
+                  f"{np.median(d[np.isfinite(d)]):.3f})")
+    scenes = [make_scene(*f.mesh) for f in frags]
+    centres, radii = _spheres(surfaces)
+    pairs = [(p, q) for p in range(len(frags)) for q in range(p + 1, len(frags))]
+    print("joint refinement of the assembled set keeping a gap (fraction of the reference size):")
+    for gap in (0.0, 0.005, 0.01, 0.015):
+        T = refine(A.T_group_fragment, surfaces, tol=tol, normal_angle=params.normal_angle, anchor=anchor,
+                   gap=gap * ref)
+        ev = _evaluate(pairs, T, surfaces, scenes, tol=tol, reg_params=params, centres=centres, radii=radii,
+                       cache={}, gap=gap * ref)
+        print(f"  gap {gap:.3f}: contact {sum(v[1] for v in ev.values()):.1f}, "
+              f"interpenetration {sum(v[2] for v in ev.values()):.1f} (mesh units squared)")
 
 
 if __name__ == "__main__":

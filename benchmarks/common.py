@@ -34,7 +34,9 @@ def add_selection(parser, *, pieces: str) -> None:
     """The bench-set selection options every benchmark over the bench set takes."""
     from pathlib import Path
 
-    parser.add_argument("root", type=Path, help="bench set folder (built if missing)")
+    parser.add_argument("root", type=Path, help="puzzle set folder (built if missing)")
+    parser.add_argument("--set", default="bench", choices=("bench", "sherds"),
+                        help="which set (data_synth.sets; default bench)")
     parser.add_argument("--pieces", default=pieces)
     parser.add_argument("--seeds", default="0")
     parser.add_argument("--meshes", default=None, help="comma-separated subset of the bench meshes")
@@ -45,16 +47,16 @@ def add_selection(parser, *, pieces: str) -> None:
 
 
 def select(args) -> list:
-    """The bench puzzles the options select (the set is built in ``args.root`` first if missing)."""
+    """The puzzles of ``args.set`` the options select (the set is built in ``args.root`` first if missing)."""
     from data_synth.make_sets import build_set
-    from data_synth.sets import bench_set
+    from data_synth.sets import SETS
 
     if not (args.root / "index.json").is_file():
-        print(f"building the bench set in {args.root} ...", flush=True)
-        build_set("bench", args.root, jobs=max(1, args.jobs))
+        print(f"building the {args.set} set in {args.root} ...", flush=True)
+        build_set(args.set, args.root, jobs=max(1, args.jobs))
     pieces = {int(p) for p in args.pieces.split(",")}
     seeds = {int(s) for s in args.seeds.split(",")}
     meshes = set(args.meshes.split(",")) if args.meshes else None
-    return [s for s in bench_set() if s.pieces in pieces and s.seed in seeds
+    return [s for s in SETS[args.set]() if s.pieces in pieces and s.seed in seeds
             and (meshes is None or s.mesh in meshes) and not (args.clean_only and s.noise)
             and not (args.noisy_only and not s.noise)]

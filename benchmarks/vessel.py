@@ -80,7 +80,8 @@ def main() -> int:
           f"{s['rot_geodesic_rmse_deg']:.2f} deg, solved {s['solved']}; gap {report['summary'].get('gap')} x size; "
           f"run {elapsed:.1f} s (--jobs {args.jobs})")
     b = scores["alignments"]["best_anchor"]
-    print(f"anchored on the best fragment instead ({b['anchor']}): strict part acc {b['summary']['part_acc_strict']:.3f}")
+    print(f"anchored on the best fragment instead ({b['anchor']}): strict part acc "
+          f"{b['summary']['part_acc_strict']:.3f}")
     if args.diagnose:
         diagnose({n: (m.vertices, m.faces) for n, m in meshes.items()}, size=size, seed=args.seed, jobs=args.jobs)
     return 0

@@ -3,6 +3,7 @@
 smoke: three small meshes of different character, 2-5 pieces; seconds to build, used by tests.
 bench: six meshes (smooth organic, thin parts, sharp CAD edges, genus > 0) x {2, 4, 8, 12, 20}
 pieces x three seeds, plus scan-noise variants; used by benchmarks.
+sherds: the thin-walled pot x {4, 8, 12} pieces x three seeds, plus scan-noise variants.
 """
 
 from __future__ import annotations
@@ -70,4 +71,10 @@ def bench_set(*, seeds: tuple[int, ...] = (0, 1, 2), noise: float = 0.001) -> li
     return clean + noisy
 
 
-SETS = {"smoke": smoke_set, "bench": bench_set}
+def sherds_set(*, seeds: tuple[int, ...] = (0, 1, 2), noise: float = 0.001) -> list[PuzzleSpec]:
+    """Thin walls: the bundled vase (data_synth.shapes.vase_mesh), whose breaks are strips."""
+    clean = [PuzzleSpec("vase", pieces, seed) for pieces in (4, 8, 12) for seed in seeds]
+    return clean + [PuzzleSpec("vase", pieces, seeds[0], noise=noise) for pieces in (4, 8, 12)]
+
+
+SETS = {"smoke": smoke_set, "bench": bench_set, "sherds": sherds_set}

@@ -135,6 +135,29 @@ def box_mesh(size=4.0) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
 
 
+def vase_mesh(*, wall: float = 0.05, segments: int = 96, rows: int = 48) -> tuple[np.ndarray, np.ndarray]:
+    """A thin-walled pot (surface of revolution about +z, 2 high): flat base, a belly of
+    radius 0.8, a neck of 0.36 and a flared rim, walls ``wall`` thick, open at the top.
+
+    The sherd shape the synthetic puzzles otherwise lack (every bench mesh is a solid).
+    ``segments`` around, ``rows`` up the profile.
+    """
+    import manifold3d as m3
+    from scipy.interpolate import PchipInterpolator
+
+    z_ctrl = [0.0, 0.3, 0.9, 1.5, 1.8, 2.0]
+    r_ctrl = [0.42, 0.68, 0.80, 0.52, 0.36, 0.44]
+    radius = PchipInterpolator(z_ctrl, r_ctrl)
+    z = np.linspace(0.0, 2.0, rows)
+    outer = np.column_stack([radius(z), z])
+    zi = np.linspace(2.0, wall, rows)
+    inner = np.column_stack([radius(zi) - wall, zi])  # horizontal offset: about the wall's thickness
+    profile = np.vstack([[[0.0, 0.0]], outer, inner, [[0.0, wall]]])
+    solid = m3.Manifold.revolve(m3.CrossSection([profile]), circular_segments=segments)
+    mesh = solid.to_mesh()
+    return np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64)
+
+
 def is_closed_manifold(faces: np.ndarray) -> bool:
     """Every directed edge appears exactly once and its reverse exactly once: closed,
     edge-manifold and consistently oriented."""

@@ -80,6 +80,13 @@ def _gap(text: str) -> float | None:
     return value
 
 
+def _thin_walls(text: str) -> bool | None:
+    value = {"auto": None, "yes": True, "no": False}.get(text.strip().lower(), "?")
+    if value == "?":
+        raise argparse.ArgumentTypeError(f"not 'auto', 'yes' or 'no': {text!r}")
+    return value
+
+
 def _cmd_describe(args: argparse.Namespace) -> int:
     from .descriptors import DescriptorParams
     from .pipeline import describe_to_file
@@ -139,7 +146,8 @@ def _cmd_match(args: argparse.Namespace) -> int:
     from .pipeline import MatchConfig, match_to_folder
 
     summary = match_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                              config=MatchConfig(max_memory=args.max_memory, gap=args.gap), jobs=_jobs(args),
+                              config=MatchConfig(max_memory=args.max_memory, gap=args.gap,
+                                                 thin_walls=args.thin_walls), jobs=_jobs(args),
                               progress=not args.quiet)
     print(f"{summary['fragments']} fragments, {summary['pairs']} pairs, {summary['touching']} touching:")
     for p in summary["pair_list"]:
@@ -173,7 +181,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .pipeline import MatchConfig, run_to_folder
 
     report = run_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                           config=MatchConfig(max_memory=args.max_memory, gap=args.gap), jobs=_jobs(args),
+                           config=MatchConfig(max_memory=args.max_memory, gap=args.gap,
+                                                 thin_walls=args.thin_walls), jobs=_jobs(args),
                            progress=not args.quiet)
     _print_run(report, args.out)
     if args.render or args.viewer:
@@ -326,6 +335,9 @@ def _add_inputs(p) -> None:
     p.add_argument("--gap", type=_gap, default=None,
                    help="how far apart mating fracture surfaces are (material lost at the break), a fraction of "
                    "the median fragment's bounding-box diagonal; 'auto' (default): measured from the pairs")
+    p.add_argument("--thin-walls", type=_thin_walls, default=None,
+                   help="match as thin-walled sherds, along their break strips: 'auto' (default: when most "
+                   "fragments are walls under 8 %% of their diagonal thick), 'yes' or 'no'")
     _add_common(p)
 
 

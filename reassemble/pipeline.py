@@ -207,6 +207,8 @@ class MatchConfig:
     denoise : when the set's vertex noise exceeds this fraction of the finest radius, every
         fragment is matched on a Taubin-smoothed copy (all smoothed alike, until the noisiest
         is down to half that); their own vertices stay in every output
+    thin_walls : match as thin-walled sherds along their break strips (:mod:`shells`): None
+        when most fragments are (:func:`shells.is_thin_shell`), or always / never
     """
 
     radii: tuple[float, ...] = (0.02, 0.04, 0.08)
@@ -215,6 +217,7 @@ class MatchConfig:
     max_memory: float = 4e9
     gap: float | None = None
     denoise: float = 0.2
+    thin_walls: bool | None = None
 
 
 @dataclasses.dataclass
@@ -348,7 +351,9 @@ def prepare_fragments(
                               f"{names[0]}: {notes[names[0]].removeprefix('not matched: ')}")
     segs = [None] * len(names)
     thickness = {k: wall_thickness(matched[k], pairs[k][1]) for k in good}
-    shell = 2 * sum(is_thin_shell(matched[k], pairs[k][1], thickness[k]) for k in good) > len(good)
+    shell = config.thin_walls
+    if shell is None:
+        shell = 2 * sum(is_thin_shell(matched[k], pairs[k][1], thickness[k]) for k in good) > len(good)
     if shell:
         log.info("thin-walled fragments (sherds): matched along their break strips")
         for k in good:
@@ -576,6 +581,11 @@ def _write_debug(tmp: Path, frags: list[PreparedFragment], results: dict) -> Non
                   T_target_source=res.best.T_target_source)
 
 
+def _resolved_match(config: MatchConfig, frags: list[PreparedFragment]) -> MatchConfig:
+    """``config`` with what was decided from the data filled in (thin walls or not)."""
+    return dataclasses.replace(config, thin_walls=bool(frags) and all(f.shell for f in frags))
+
+
 def _resolved(seed: int, size: float, noise: float, **stages) -> dict:
     out = {"seed": seed, "reference_size": size, "vertex_noise": noise / size}
     out.update({k: dataclasses.asdict(v) for k, v in stages.items()})
@@ -615,8 +625,8 @@ def match_to_folder(
                                         "version": __version__, "pairs": pairs})
         write_json(tmp / "fragments.json", {"fragments": {f.name: _fragment_entry(f) for f in frags},
                                             "warnings": warnings})
-        write_json(tmp / "config.json", _resolved(seed, size, set_noise(frags), match=config, segmentation=seg_params,
-                                                  registration=reg_params))
+        write_json(tmp / "config.json", _resolved(seed, size, set_noise(frags), match=_resolved_match(config, frags),
+                                                  segmentation=seg_params, registration=reg_params))
         if debug:
             _write_debug(tmp, frags, results)
     return {"fragments": len(frags), "pairs": len(pairs), "touching": sum(p["touching"] for p in pairs),
@@ -721,8 +731,9 @@ def run_to_folder(
         write_json(tmp / "pairs.json", {"format": "reassemble-pairs/1", "convention": "T_target_source",
                                         "version": __version__, "pairs": _pairs_json(frags, results)})
         write_json(tmp / "report.json", report)
-        write_json(tmp / "config.json", _resolved(seed, size, set_noise(frags), match=config, segmentation=seg_params,
-                                                  registration=reg_params, assembly=assembly_params))
+        write_json(tmp / "config.json", _resolved(seed, size, set_noise(frags), match=_resolved_match(config, frags),
+                                                  segmentation=seg_params, registration=reg_params,
+                                                  assembly=assembly_params))
         write_npz(tmp / "analysis.npz", **_analysis_arrays(frags, A.contacts, touching, size=size, config=config))
         write_glb(tmp / "assembled.glb", {f.name: (f.vertices, f.faces) for f in frags},
                   {n: T_world[k] for k, n in enumerate(names)}, colors=dict(zip(names, colors)))

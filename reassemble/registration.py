@@ -216,7 +216,10 @@ def ransac(
 def _consensus(T, anchors, source, target, tree, hoods, *, tol, cos_tol, params, first: int, rng):
     """Hypotheses ranked by probe inliers around their anchors: ``first`` probes for all,
     256 for the best ``params.consensus_pool``; (h, 4, 4) and (h,), best first."""
-    inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, first, rng), tol=tol, cos_tol=cos_tol)
+    probes = _draw(hoods, anchors, first, rng)
+    # in chunks, so memory stays bounded (two sherds give up to params.hypotheses at once)
+    inliers = np.concatenate([_inliers(T[k:k + 20000], source, target, tree, probes[k:k + 20000], tol=tol,
+                                       cos_tol=cos_tol) for k in range(0, len(T), 20000)])
     top = np.argsort(-inliers, kind="stable")[: params.consensus_pool]
     T, anchors = T[top], anchors[top]
     inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, 256, rng), tol=tol, cos_tol=cos_tol)

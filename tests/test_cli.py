@@ -91,6 +91,8 @@ def test_bad_options(tmp_path):
     for bad in ("-0.1", "nan", "wide"):
         rc, _, err = run("run", tmp_path, "--gap", bad, "--out", tmp_path / "o")
         assert_one_line_error(rc, err, "--gap", "auto")
+    rc, _, err = run("run", tmp_path, "--thin-walls", "maybe", "--out", tmp_path / "o")
+    assert_one_line_error(rc, err, "--thin-walls", "auto")
     assert not (tmp_path / "o").exists()
 
 

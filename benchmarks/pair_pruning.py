@@ -1,0 +1,155 @@
+"""Could a cheap test skip pairs before the full match? Recall of candidate pair priors.
+
+    python benchmarks/pair_pruning.py puzzles/bench                     # 20 pieces, seed 0, clean + noisy
+    python benchmarks/pair_pruning.py puzzles/bench --meshes torus,spot --full --jobs 2
+
+Every pair of a puzzle's fragments gets a prior score, cheaply, from what exists after the
+descriptors; a pruning would fully match only the pairs with the highest priors. Per prior
+and puzzle: the time per pair, the ROC AUC of touching pairs (contact >= 5 % of the smaller
+surface) against pairs that do not touch, and the share of touching pairs (>= 5 %, and any
+contact) kept when only the best half or the best two thirds of the pairs are kept.
+
+Priors:
+- ``sig``: signature complementarity, the fracture area of either fragment whose mate
+  signature (H flipped) lies within the set's 10th-percentile nearest-neighbour distance of
+  the other's signatures (the smaller of the two ways);
+- ``ppf``: how many pairs of signature correspondences agree as point-pair features (the
+  distance, normal and chord-angle checks of the RANSAC, before any fit);
+- ``full`` (with --full; slow, ~1.5 s a pair): the best score of the full registration, the
+  reference a cheap prior would have to match.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import add_selection, header, select  # noqa: E402
+
+
+def truth_share(gt: dict, frags) -> np.ndarray:
+    """(n, n) true contact area over the smaller fragment's surface area."""
+    contact = {tuple(sorted(c["fragments"])): float(c["area"]) for c in gt["contacts"]}
+    n = len(frags)
+    share = np.zeros((n, n))
+    for i in range(n):
+        for j in range(n):
+            if i != j:
+                key = tuple(sorted((frags[i].name, frags[j].name)))
+                share[i, j] = contact.get(key, 0.0) / min(frags[i].surface.area, frags[j].surface.area)
+    return share
+
+
+def sig_prior(frags) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    from reassemble.features import mate_signature
+
+    n = len(frags)
+    dist = {}
+    for i in range(n):
+        for j in range(n):
+            if i != j and len(frags[i].surface.keypoints) and len(frags[j].surface.keypoints):
+                dist[i, j] = cKDTree(frags[j].surface.signature).query(mate_signature(frags[i].surface.signature))[0]
+    S = np.zeros((n, n))
+    if dist:
+        delta = np.quantile(np.concatenate(list(dist.values())), 0.1)
+        for (i, j), d in dist.items():
+            S[i, j] = np.mean(d < delta) * frags[i].surface.fracture_area
+    return np.minimum(S, S.T)
+
+
+def ppf_prior(frags, *, size: float, params) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    from reassemble.registration import correspondences
+
+    def angle(x, y):
+        return np.arccos(np.clip(np.einsum("hi,hi->h", x, y), -1.0, 1.0))
+
+    n = len(frags)
+    S = np.zeros((n, n))
+    tol, radius, limit = params.ransac_tolerance * size, params.pair_radius * size, np.radians(params.normal_angle)
+    for i in range(n):
+        for j in range(i + 1, n):
+            s, t = frags[i].surface, frags[j].surface
+            if len(s.keypoints) < 3 or len(t.keypoints) < 3:
+                continue
+            pairs = correspondences(s, t, neighbours=params.neighbours)
+            joint = np.hstack([s.keypoints[pairs[:, 0]], t.keypoints[pairs[:, 1]]])
+            pick = cKDTree(joint).query_pairs(radius, p=np.inf, output_type="ndarray")
+            if len(pick) == 0:
+                continue
+            a, b = s.keypoints[pairs[pick, 0]], t.keypoints[pairs[pick, 1]]
+            na, nb = s.keypoint_normals[pairs[pick, 0]], -t.keypoint_normals[pairs[pick, 1]]
+            da, db = np.linalg.norm(a[:, 1] - a[:, 0], axis=1), np.linalg.norm(b[:, 1] - b[:, 0], axis=1)
+            ua = (a[:, 1] - a[:, 0]) / np.maximum(da, 1e-300)[:, None]
+            ub = (b[:, 1] - b[:, 0]) / np.maximum(db, 1e-300)[:, None]
+            ok = (np.abs(da - db) < tol) & (da > 3 * tol)
+            ok &= np.abs(angle(na[:, 0], na[:, 1]) - angle(nb[:, 0], nb[:, 1])) < limit
+            ok &= np.abs(angle(na[:, 0], ua) - angle(nb[:, 0], ub)) < limit
+            ok &= np.abs(angle(na[:, 1], ua) - angle(nb[:, 1], ub)) < limit
+            S[i, j] = S[j, i] = ok.sum()
+    return S
+
+
+def full_prior(frags, *, size: float, params, jobs: int) -> np.ndarray:
+    from reassemble.pipeline import match_pairs
+
+    n = len(frags)
+    S = np.full((n, n), -1.0)
+    for (i, j), res in match_pairs(frags, size=size, params=params, jobs=jobs).items():
+        S[i, j] = S[j, i] = res.best.score if res.best is not None else -1.0
+    return S
+
+
+def measure(S: np.ndarray, share: np.ndarray) -> str:
+    from sklearn.metrics import roc_auc_score
+
+    iu = np.triu_indices(len(S), 1)
+    x, sh = S[iu], share[iu]
+    touch, apart = sh >= 0.05, sh == 0
+    auc = roc_auc_score(touch[touch | apart], x[touch | apart]) if touch.any() and apart.any() else float("nan")
+    out = f"AUC {auc:.3f}"
+    for keep in (0.5, 2 / 3):
+        kept = x >= np.quantile(x, 1 - keep)
+        out += f" | best {keep:.2f}: {kept[touch].mean():.2f} / {kept[sh > 0].mean():.2f}"
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_selection(parser, pieces="20")
+    parser.add_argument("--full", action="store_true", help="also the full registration's best score (slow)")
+    args = parser.parse_args()
+    header()
+    from reassemble.pipeline import prepare_fragments, read_puzzle, registration_params
+
+    specs = select(args)
+    print("kept shares: touching pairs (contact >= 5 %) / pairs with any contact")
+    for spec in specs:
+        puzzle = read_puzzle(args.root / spec.name / "ground_truth.json", with_labels=False)
+        frags, size = prepare_fragments({n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}, seed=args.seed,
+                                        jobs=args.jobs)
+        share = truth_share(puzzle.ground_truth, frags)
+        params = registration_params(frags, size=size)
+        n_pairs = len(frags) * (len(frags) - 1) // 2
+        priors = {"sig": lambda: sig_prior(frags), "ppf": lambda: ppf_prior(frags, size=size, params=params)}
+        if args.full:
+            priors["full"] = lambda: full_prior(frags, size=size, params=params, jobs=args.jobs)
+        for name, fn in priors.items():
+            t = time.perf_counter()
+            S = fn()
+            dt = (time.perf_counter() - t) / n_pairs
+            print(f"{spec.name:<34s} {name:>4s} {dt:6.3f} s/pair  {measure(S, share)}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -66,35 +66,22 @@ def sig_prior(frags) -> np.ndarray:
 
 
 def ppf_prior(frags, *, size: float, params) -> np.ndarray:
-    from scipy.spatial import cKDTree
-
-    from reassemble.registration import correspondences
-
-    def angle(x, y):
-        return np.arccos(np.clip(np.einsum("hi,hi->h", x, y), -1.0, 1.0))
+    from reassemble.registration import correspondences, pair_candidates, point_pairs_agree
 
     n = len(frags)
     S = np.zeros((n, n))
-    tol, radius, limit = params.ransac_tolerance * size, params.pair_radius * size, np.radians(params.normal_angle)
     for i in range(n):
         for j in range(i + 1, n):
             s, t = frags[i].surface, frags[j].surface
             if len(s.keypoints) < 3 or len(t.keypoints) < 3:
                 continue
             pairs = correspondences(s, t, neighbours=params.neighbours)
-            joint = np.hstack([s.keypoints[pairs[:, 0]], t.keypoints[pairs[:, 1]]])
-            pick = cKDTree(joint).query_pairs(radius, p=np.inf, output_type="ndarray")
+            pick = pair_candidates(s, t, pairs, radius=params.pair_radius * size)
             if len(pick) == 0:
                 continue
-            a, b = s.keypoints[pairs[pick, 0]], t.keypoints[pairs[pick, 1]]
-            na, nb = s.keypoint_normals[pairs[pick, 0]], -t.keypoint_normals[pairs[pick, 1]]
-            da, db = np.linalg.norm(a[:, 1] - a[:, 0], axis=1), np.linalg.norm(b[:, 1] - b[:, 0], axis=1)
-            ua = (a[:, 1] - a[:, 0]) / np.maximum(da, 1e-300)[:, None]
-            ub = (b[:, 1] - b[:, 0]) / np.maximum(db, 1e-300)[:, None]
-            ok = (np.abs(da - db) < tol) & (da > 3 * tol)
-            ok &= np.abs(angle(na[:, 0], na[:, 1]) - angle(nb[:, 0], nb[:, 1])) < limit
-            ok &= np.abs(angle(na[:, 0], ua) - angle(nb[:, 0], ub)) < limit
-            ok &= np.abs(angle(na[:, 1], ua) - angle(nb[:, 1], ub)) < limit
+            ok, _ = point_pairs_agree(s.keypoints[pairs[pick, 0]], t.keypoints[pairs[pick, 1]],
+                                      s.keypoint_normals[pairs[pick, 0]], -t.keypoint_normals[pairs[pick, 1]],
+                                      tol=params.ransac_tolerance * size, normal_angle=params.normal_angle)
             S[i, j] = S[j, i] = ok.sum()
     return S
 

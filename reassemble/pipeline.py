@@ -363,7 +363,7 @@ def prepare_fragments(
                                       size=size, params=segment_params or SegmentParams(), seed=seed)):
             segs[k] = s
     # on sherds one keypoint pair is a hypothesis: the cost grows as the product of the
-    # keypoint counts (vessel set at the solids' spacing: ~700 per sherd, 140 s for its 10 pairs)
+    # keypoint counts (at the solids' spacing ~700 per vessel sherd)
     spacing = config.keypoint_spacing * size * (2.0 if shell else 1.0)
     rngs = np.random.default_rng(seed).spawn(len(names))
     out = []
@@ -392,13 +392,18 @@ def set_noise(fragments: list[PreparedFragment]) -> float:
     return float(np.median([f.noise for f in fragments])) if fragments else 0.0
 
 
+def thin_walled(fragments: list[PreparedFragment]) -> bool:
+    """Whether the set was prepared as thin-walled sherds (:func:`prepare_fragments` decides for all)."""
+    return bool(fragments) and all(f.shell for f in fragments)
+
+
 def registration_params(fragments: list[PreparedFragment], *, size: float, params=None):
     """The registration options for this set, resolved from the data: ``params`` (default
     ``RegistrationParams()``) with the contact tolerance raised to cover its vertex noise."""
     from .registration import RegistrationParams, with_noise
 
     params = with_noise(params or RegistrationParams(), noise=set_noise(fragments), size=size)
-    if fragments and all(f.shell for f in fragments):
+    if thin_walled(fragments):
         # one-point hypotheses on strips are many and their local consensus weak (a break
         # curve matches any curve over a short stretch): more of them go on to ICP
         params = dataclasses.replace(params, shortlist=100, consensus_pool=2000)
@@ -583,7 +588,7 @@ def _write_debug(tmp: Path, frags: list[PreparedFragment], results: dict) -> Non
 
 def _resolved_match(config: MatchConfig, frags: list[PreparedFragment]) -> MatchConfig:
     """``config`` with what was decided from the data filled in (thin walls or not)."""
-    return dataclasses.replace(config, thin_walls=bool(frags) and all(f.shell for f in frags))
+    return dataclasses.replace(config, thin_walls=thin_walled(frags))
 
 
 def _resolved(seed: int, size: float, noise: float, **stages) -> dict:
@@ -716,7 +721,7 @@ def run_to_folder(
             "sub_assemblies": sum(len(g) > 1 for g in groups), "alone": sum(len(g) == 1 for g in groups),
             "contacts": len(A.contacts),
             "vertex_noise": _round(set_noise(frags) / size), "contact_tolerance": _round(reg_params.tolerance),
-            "gap": _round(reg_params.gap), "thin_walled": bool(frags) and all(f.shell for f in frags),
+            "gap": _round(reg_params.gap), "thin_walled": thin_walled(frags),
             "timings_s": {k: round(v, 2) for k, v in timings.items()},
         },
         "groups": groups,

@@ -165,8 +165,7 @@ def ransac(
 
     if len(pairs) < 2:
         return np.zeros((0, 4, 4)), np.zeros(0, int)
-    joint = np.hstack([source.keypoints[pairs[:, 0]], target.keypoints[pairs[:, 1]]])
-    pick = cKDTree(joint).query_pairs(radius, p=np.inf, output_type="ndarray")
+    pick = pair_candidates(source, target, pairs, radius=radius)
     if len(pick) > params.hypotheses:
         pick = pick[np.sort(rng.choice(len(pick), params.hypotheses, replace=False))]
     if len(pick) == 0:
@@ -175,20 +174,8 @@ def ransac(
     b = target.keypoints[pairs[pick, 1]]
     na = source.keypoint_normals[pairs[pick, 0]]
     nb = -target.keypoint_normals[pairs[pick, 1]]  # mating normals are opposed
-    # point-pair features must agree: distance, the normals' angle, each normal's angle to the chord
-    da = np.linalg.norm(a[:, 1] - a[:, 0], axis=1)
-    db = np.linalg.norm(b[:, 1] - b[:, 0], axis=1)
-    ok = (np.abs(da - db) < tol) & (da > 3 * tol)
-    ua = (a[:, 1] - a[:, 0]) / np.maximum(da, 1e-300)[:, None]
-    ub = (b[:, 1] - b[:, 0]) / np.maximum(db, 1e-300)[:, None]
+    ok, da = point_pairs_agree(a, b, na, nb, tol=tol, normal_angle=params.normal_angle)
     angle = np.radians(params.normal_angle)
-
-    def ang(x, y):
-        return np.arccos(np.clip(np.einsum("hi,hi->h", x, y), -1.0, 1.0))
-
-    ok &= np.abs(ang(na[:, 0], na[:, 1]) - ang(nb[:, 0], nb[:, 1])) < angle
-    ok &= np.abs(ang(na[:, 0], ua) - ang(nb[:, 0], ub)) < angle
-    ok &= np.abs(ang(na[:, 1], ua) - ang(nb[:, 1], ub)) < angle
     idx = np.flatnonzero(ok)
     if len(idx) > params.max_scored:
         idx = np.sort(rng.choice(idx, params.max_scored, replace=False))
@@ -266,6 +253,36 @@ def frame_hypotheses(
     hoods = _neighbourhoods(source.keypoints, anchors, 2.0 * radius)
     return _consensus(T, anchors, source, target, cKDTree(target.keypoints), hoods, tol=tol,
                       cos_tol=np.cos(np.radians(params.normal_angle)), params=params, first=32, rng=rng)
+
+
+def pair_candidates(source: FractureSurface, target: FractureSurface, pairs: np.ndarray, *, radius: float) -> np.ndarray:
+    """(p, 2) indices into ``pairs`` of the correspondence pairs whose source keypoints and
+    whose target keypoints both lie within ``radius`` of each other."""
+    from scipy.spatial import cKDTree
+
+    joint = np.hstack([source.keypoints[pairs[:, 0]], target.keypoints[pairs[:, 1]]])
+    return cKDTree(joint).query_pairs(radius, p=np.inf, output_type="ndarray")
+
+
+def point_pairs_agree(a, b, na, nb, *, tol: float, normal_angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """Which of (h, 2, 3) source point pairs ``a`` (normals ``na``) may map onto target pairs
+    ``b`` (normals ``nb``, already flipped for a mate): their point-pair features agree (the
+    distance within ``tol`` and over 3 ``tol``; the normals' angle and each normal's angle to
+    the chord within ``normal_angle`` degrees). Returns (h,) bool and the (h,) source distances."""
+    da = np.linalg.norm(a[:, 1] - a[:, 0], axis=1)
+    db = np.linalg.norm(b[:, 1] - b[:, 0], axis=1)
+    ok = (np.abs(da - db) < tol) & (da > 3 * tol)
+    ua = (a[:, 1] - a[:, 0]) / np.maximum(da, 1e-300)[:, None]
+    ub = (b[:, 1] - b[:, 0]) / np.maximum(db, 1e-300)[:, None]
+    angle = np.radians(normal_angle)
+
+    def ang(x, y):
+        return np.arccos(np.clip(np.einsum("hi,hi->h", x, y), -1.0, 1.0))
+
+    ok &= np.abs(ang(na[:, 0], na[:, 1]) - ang(nb[:, 0], nb[:, 1])) < angle
+    ok &= np.abs(ang(na[:, 0], ua) - ang(nb[:, 0], ub)) < angle
+    ok &= np.abs(ang(na[:, 1], ua) - ang(nb[:, 1], ub)) < angle
+    return ok, da
 
 
 def _neighbourhoods(points: np.ndarray, anchors: np.ndarray, radius: float) -> dict[int, np.ndarray]:

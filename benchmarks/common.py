@@ -34,9 +34,10 @@ def add_selection(parser, *, pieces: str) -> None:
     """The bench-set selection options every benchmark over the bench set takes."""
     from pathlib import Path
 
+    from data_synth.sets import SETS
+
     parser.add_argument("root", type=Path, help="puzzle set folder (built if missing)")
-    parser.add_argument("--set", default="bench", choices=("bench", "sherds"),
-                        help="which set (data_synth.sets; default bench)")
+    parser.add_argument("--set", default="bench", choices=sorted(SETS), help="which set (data_synth.sets; default bench)")
     parser.add_argument("--pieces", default=pieces)
     parser.add_argument("--seeds", default="0")
     parser.add_argument("--meshes", default=None, help="comma-separated subset of the bench meshes")

@@ -12,8 +12,10 @@ rotation and the mean distance from its true place.
 
 With ``--diagnose``, also what the geometry says about the gaps between the pieces: the
 mean displacement of each piece from its true place against the largest; the separation
-``estimate_gap`` reads for every touching pair when started at the true pose; and the
-contact and interpenetration of the assembled set refined jointly with a given gap kept.
+``estimate_gap`` reads for every touching pair when started at the true pose; how far
+mating keypoints' normals are from opposed (strip frames, and the descriptors' ball
+normals they replace); and the contact and interpenetration of the assembled set refined
+jointly with a given gap kept.
 """
 
 from __future__ import annotations
@@ -115,6 +117,22 @@ def diagnose(meshes: dict, *, size: float, seed: int, jobs: int) -> None:
             d = cKDTree(surfaces[j].samples).query(surfaces[i].samples, distance_upper_bound=0.04 * ref)[0]
             print(f"  {frags[i].name} - {frags[j].name}: {g:.3f} (the strips' median distance there: "
                   f"{np.median(d[np.isfinite(d)]):.3f})")
+    print("normals of mating strip keypoints at the true pose (median angle from exactly opposed, degrees):")
+    for (i, j), res in sorted(results.items()):
+        if res.touching:
+            si, sj = surfaces[i], surfaces[j]
+            d, near = cKDTree(sj.keypoints).query(si.keypoints, distance_upper_bound=0.04 * ref)
+            ok = np.isfinite(d)
+            # keypoints are face centres: the descriptors' (ball) normals there, for comparison
+            ball = [frags[k].descriptors.normal[cKDTree(frags[k].vertices[frags[k].faces].mean(axis=1)).query(
+                surfaces[k].keypoints)[1], 0] for k in (i, j)]
+
+            def opposed(a, b):
+                return np.degrees(np.arccos(np.clip(-np.einsum("ij,ij->i", a, b), -1.0, 1.0)))
+
+            print(f"  {frags[i].name} - {frags[j].name}: strip frames "
+                  f"{np.median(opposed(si.keypoint_normals[ok], sj.keypoint_normals[near[ok]])):.1f}, "
+                  f"descriptor normals {np.median(opposed(ball[0][ok], ball[1][near[ok]])):.1f}")
     scenes = [make_scene(*f.mesh) for f in frags]
     centres, radii = _spheres(surfaces)
     pairs = [(p, q) for p in range(len(frags)) for q in range(p + 1, len(frags))]

@@ -3,8 +3,9 @@
 A sherd is two smooth walls (outside and inside of the vessel) joined along its outline by
 a break strip about one wall thickness wide. Its break is a band, not a surface: the
 integral-invariant signatures at radii larger than the wall see the walls, not the break,
-and a ball-normal there is off the strip normal by 30-60 degrees (measured on the vessel
-set, between mates). Sherds are matched along their strips instead:
+and the ball normals of mates there are 30-63 degrees from opposed (the strip frames
+below: 9-15; vessel set, ``benchmarks/vessel.py --diagnose``). Sherds are matched along
+their strips instead:
 
 - the strip is what is not wall: a ray cast inward from a wall face meets the opposite wall
   (an antiparallel face) within about one thickness; from a strip face it runs along the
@@ -68,9 +69,8 @@ def is_thin_shell(vertices: np.ndarray, faces: np.ndarray, thickness: np.ndarray
 def strip_segmentation(vertices: np.ndarray, faces: np.ndarray, thickness: np.ndarray):
     """Segmentation of a sherd: fracture = the strip (every face that is not wall).
 
-    The vessel's own rim and base are strips too: nothing here tells them from a break
-    (their roughness is alike on the vessel set, AUC 0.55-0.65); the registration's contact
-    and penetration scores and the assembly's consistency have to.
+    The vessel's own rim and base are strips too: nothing here tells them from a break;
+    the registration's contact and penetration scores and the assembly's consistency have to.
     """
     from .geometry import connected_components, face_adjacency
     from .segmentation import Segmentation

@@ -94,8 +94,10 @@ def diagnose(meshes: dict, *, size: float, seed: int, jobs: int) -> None:
     from reassemble.assembly import AssemblyParams, _evaluate, _spheres, assemble, refine
     from reassemble.geometry import invert_transform, make_scene, transform_points
     from reassemble.pipeline import match_pairs, prepare_fragments, registration_params
-    from reassemble.registration import estimate_gap
     from scipy.spatial import cKDTree
+
+    from reassemble.registration import estimate_gap
+    from reassemble.shells import wall_thickness
 
     frags, ref = prepare_fragments(meshes, seed=seed, jobs=jobs)
     params = registration_params(frags, size=ref)
@@ -104,6 +106,10 @@ def diagnose(meshes: dict, *, size: float, seed: int, jobs: int) -> None:
     A = assemble(surfaces, [f.mesh for f in frags], results, size=ref, params=AssemblyParams(), reg_params=params,
                  seed=seed)
     tol = params.tolerance * ref
+    print("median wall thickness / fragment diagonal:")
+    for f in frags:
+        t = wall_thickness(f.vertices, f.faces)
+        print(f"  {f.name:<20s} {np.median(t[np.isfinite(t)]) / np.linalg.norm(np.ptp(f.vertices, axis=0)):.3f}")
     anchor = int(np.argmax([s.area for s in surfaces]))
     print(f"displacement from the true place against {frags[anchor].name} (mesh units; diagonal {size:.3g}):")
     for k, f in enumerate(frags):

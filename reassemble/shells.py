@@ -58,8 +58,10 @@ def _walls(thickness: np.ndarray) -> tuple[np.ndarray, float]:
 
 def is_thin_shell(vertices: np.ndarray, faces: np.ndarray, thickness: np.ndarray) -> bool:
     """Whether a fragment is a thin-walled sherd: walls are most of its surface and thin
-    against its size. On the bench solids the median wall (the far side of a solid) is at
-    least 0.13 of the fragment diagonal; on the vessel set at most 0.05."""
+    against its size. Over the bench solids' fragments the median wall (the far side of a
+    solid) is at least 0.125 of the diagonal (median over a puzzle), no fragment passes;
+    the vessel set's 0.032-0.050, the vase's 0.016-0.028 (``benchmarks/thin_walls.py``,
+    ``benchmarks/vessel.py --diagnose``)."""
     wall, median = _walls(thickness)
     area = face_areas(vertices, faces)
     diag = float(np.linalg.norm(np.ptp(vertices, axis=0)))

@@ -30,7 +30,7 @@ def main() -> int:
         args.seeds = "0,1,2"
     header()
     from reassemble.pipeline import read_puzzle
-    from reassemble.shells import is_thin_shell, wall_thickness
+    from reassemble.shells import is_thin_shell, wall_thickness, walls
 
     lowest, passed = [], 0
     for spec in select(args):
@@ -38,8 +38,7 @@ def main() -> int:
         ratios, thin = [], 0
         for m in puzzle.meshes.values():
             t = wall_thickness(m.vertices, m.faces)
-            finite = t[np.isfinite(t)]
-            ratios.append(np.median(finite) / np.linalg.norm(np.ptp(m.vertices, axis=0)) if len(finite) else np.inf)
+            ratios.append(walls(t)[1] / np.linalg.norm(np.ptp(m.vertices, axis=0)))
             thin += is_thin_shell(m.vertices, m.faces, t)
         lowest.append(min(ratios))
         passed += thin

@@ -97,7 +97,7 @@ def diagnose(meshes: dict, *, size: float, seed: int, jobs: int) -> None:
     from scipy.spatial import cKDTree
 
     from reassemble.registration import estimate_gap
-    from reassemble.shells import wall_thickness
+    from reassemble.shells import wall_thickness, walls
 
     frags, ref = prepare_fragments(meshes, seed=seed, jobs=jobs)
     params = registration_params(frags, size=ref)
@@ -108,8 +108,8 @@ def diagnose(meshes: dict, *, size: float, seed: int, jobs: int) -> None:
     tol = params.tolerance * ref
     print("median wall thickness / fragment diagonal:")
     for f in frags:
-        t = wall_thickness(f.vertices, f.faces)
-        print(f"  {f.name:<20s} {np.median(t[np.isfinite(t)]) / np.linalg.norm(np.ptp(f.vertices, axis=0)):.3f}")
+        median = walls(wall_thickness(f.vertices, f.faces))[1]
+        print(f"  {f.name:<20s} {median / np.linalg.norm(np.ptp(f.vertices, axis=0)):.3f}")
     anchor = int(np.argmax([s.area for s in surfaces]))
     print(f"displacement from the true place against {frags[anchor].name} (mesh units; diagonal {size:.3g}):")
     for k, f in enumerate(frags):

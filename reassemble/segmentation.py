@@ -81,6 +81,18 @@ class Segmentation:
     area: float
 
 
+def fracture_regions(fracture: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """(f,) region per face: connected fracture faces (``pairs``: face adjacency) share a
+    number 0, 1, ...; -1 on original surface."""
+    region = np.full(len(fracture), -1)
+    idx = np.flatnonzero(fracture)
+    if len(idx):
+        both = fracture[pairs[:, 0]] & fracture[pairs[:, 1]]
+        _, comp = connected_components(len(fracture), pairs[both])
+        region[idx] = np.unique(comp[idx], return_inverse=True)[1]
+    return region
+
+
 def make_patches(
     vertices: np.ndarray, faces: np.ndarray, *, size: float, params: SegmentParams = SegmentParams()
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -280,14 +292,8 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
         else:
             label = prob > 0.5
         fracture = label[f.patch]
-        region = np.full(len(fracture), -1)
-        idx = np.flatnonzero(fracture)
-        if len(idx):
-            both = fracture[f.pairs[:, 0]] & fracture[f.pairs[:, 1]]
-            _, comp = connected_components(len(fracture), f.pairs[both])
-            region[idx] = np.unique(comp[idx], return_inverse=True)[1]
         out.append(Segmentation(
-            fracture=fracture, probability=prob[f.patch], patch=f.patch, region=region,
+            fracture=fracture, probability=prob[f.patch], patch=f.patch, region=fracture_regions(fracture, f.pairs),
             fracture_area=float(f.face_area[fracture].sum()), area=float(f.face_area.sum()),
         ))
     return out

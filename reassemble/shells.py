@@ -47,8 +47,9 @@ def wall_thickness(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return out
 
 
-def _walls(thickness: np.ndarray) -> tuple[np.ndarray, float]:
-    """(f,) wall mask and the median wall thickness (inf when there are no walls)."""
+def walls(thickness: np.ndarray) -> tuple[np.ndarray, float]:
+    """(f,) wall mask (an opposite wall within 2 median thicknesses) and the median wall
+    thickness (inf when there are no walls), from :func:`wall_thickness`."""
     finite = thickness[np.isfinite(thickness)]
     if len(finite) == 0:
         return np.zeros(len(thickness), bool), np.inf
@@ -62,7 +63,7 @@ def is_thin_shell(vertices: np.ndarray, faces: np.ndarray, thickness: np.ndarray
     solid) is at least 0.125 of the diagonal (median over a puzzle), no fragment passes;
     the vessel set's 0.032-0.050, the vase's 0.016-0.028 (``benchmarks/thin_walls.py``,
     ``benchmarks/vessel.py --diagnose``)."""
-    wall, median = _walls(thickness)
+    wall, median = walls(thickness)
     area = face_areas(vertices, faces)
     diag = float(np.linalg.norm(np.ptp(vertices, axis=0)))
     return bool(median < SHELL_THICKNESS * diag and area[wall].sum() > SHELL_WALL_SHARE * area.sum())
@@ -74,20 +75,14 @@ def strip_segmentation(vertices: np.ndarray, faces: np.ndarray, thickness: np.nd
     The vessel's own rim and base are strips too: nothing here tells them from a break;
     the registration's contact and penetration scores and the assembly's consistency have to.
     """
-    from .geometry import connected_components, face_adjacency
-    from .segmentation import Segmentation
+    from .geometry import face_adjacency
+    from .segmentation import Segmentation, fracture_regions
 
-    wall, _ = _walls(thickness)
+    wall, _ = walls(thickness)
     strip = ~wall
     area = face_areas(vertices, faces)
-    region = np.full(len(faces), -1)
-    idx = np.flatnonzero(strip)
-    if len(idx):
-        pairs = face_adjacency(faces)[0]
-        both = strip[pairs[:, 0]] & strip[pairs[:, 1]]
-        _, comp = connected_components(len(faces), pairs[both])
-        region[idx] = np.unique(comp[idx], return_inverse=True)[1]
-    return Segmentation(fracture=strip, probability=strip.astype(float), patch=np.arange(len(faces)), region=region,
+    return Segmentation(fracture=strip, probability=strip.astype(float), patch=np.arange(len(faces)),
+                        region=fracture_regions(strip, face_adjacency(faces)[0]),
                         fracture_area=float(area[strip].sum()), area=float(area.sum()))
 
 
@@ -110,7 +105,7 @@ def strip_frames(
     t : (k, 3) unit tangents: the main direction of the strip keypoints within 2.5
         thicknesses, across the wall normal (sign arbitrary)
     """
-    wall, median = _walls(thickness)
+    wall, median = walls(thickness)
     centres = vertices[faces].mean(axis=1)
     fn, area = face_normals(vertices, faces), face_areas(vertices, faces)
     W = np.flatnonzero(wall)
@@ -139,4 +134,4 @@ def strip_frames(
     return n, t
 
 
-__all__ = ["is_thin_shell", "strip_frames", "strip_segmentation", "wall_thickness"]
+__all__ = ["is_thin_shell", "strip_frames", "strip_segmentation", "wall_thickness", "walls"]

@@ -3,8 +3,8 @@
 A sherd is two smooth walls (outside and inside of the vessel) joined along its outline by
 a break strip about one wall thickness wide. Its break is a band, not a surface: the
 integral-invariant signatures at radii larger than the wall see the walls, not the break,
-and the ball normals of mates there are 30-63 degrees from opposed (the strip frames
-below: 9-15; vessel set, ``benchmarks/vessel.py --diagnose``). Sherds are matched along
+and the ball normals of mates there are 36-68 degrees from opposed (the strip frames
+below: 8-26; vessel set, ``benchmarks/vessel.py --diagnose``). Sherds are matched along
 their strips instead:
 
 - the strip is what is not wall: a ray cast inward from a wall face meets the opposite wall

@@ -42,7 +42,8 @@ def _cmd_break(args: argparse.Namespace) -> int:
         pieces=args.pieces, roughness=args.roughness, cut_edge=args.cut_edge, noise=args.noise,
         chips=args.chips, chip_size=args.chip_size, decimate=args.decimate, gap=args.gap, scale=args.scale,
     )
-    out = break_to_folder(args.mesh, args.out, params=params, seed=args.seed, force=args.force)
+    out = break_to_folder(args.mesh, args.out, params=params, seed=args.seed, force=args.force,
+                          fill_holes=args.fill_holes)
     print(f"wrote {args.pieces} fragments and the ground truth to {out}/")
     return 0
 
@@ -80,6 +81,25 @@ def _gap(text: str) -> float | None:
     return value
 
 
+FILL_HOLES = 0.25  # --fill-holes without a value: holes up to a quarter of the mesh's size
+
+
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 < value <= 1.0:  # nan fails it too
+        raise argparse.ArgumentTypeError(f"not a fraction in (0, 1]: {text!r}")
+    return value
+
+
+def _add_fill_holes(p) -> None:
+    p.add_argument("--fill-holes", type=_fraction, nargs="?", const=FILL_HOLES, default=None, metavar="MAX",
+                   help="close the holes of open scans with flat patches, those up to MAX of the mesh's "
+                   f"bounding-box diagonal (default {FILL_HOLES} when given; without it an open mesh is refused)")
+
+
 def _thin_walls(text: str) -> bool | None:
     value = {"auto": None, "yes": True, "no": False}.get(text.strip().lower(), "?")
     if value == "?":
@@ -96,7 +116,8 @@ def _cmd_describe(args: argparse.Namespace) -> int:
         principal=args.principal, max_memory=args.max_memory,
     )
     summary = describe_to_file(
-        args.mesh, args.out, radii=args.radii, relative=args.relative, params=params, force=args.force
+        args.mesh, args.out, radii=args.radii, relative=args.relative, params=params, force=args.force,
+        fill_holes=args.fill_holes,
     )
     radii = ", ".join(f"{r:.4g}" for r in summary["radii"])
     print(f"{summary['vertices']} vertices, radii {radii}: {summary['timings']['total']:.2f} s -> {args.out}")
@@ -147,7 +168,8 @@ def _cmd_match(args: argparse.Namespace) -> int:
 
     summary = match_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
                               config=MatchConfig(max_memory=args.max_memory, gap=args.gap,
-                                                 thin_walls=args.thin_walls), jobs=_jobs(args),
+                                                 thin_walls=args.thin_walls, fill_holes=args.fill_holes),
+                              jobs=_jobs(args),
                               progress=not args.quiet)
     print(f"{summary['fragments']} fragments, {summary['pairs']} pairs, {summary['touching']} touching:")
     for p in summary["pair_list"]:
@@ -182,7 +204,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     report = run_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
                            config=MatchConfig(max_memory=args.max_memory, gap=args.gap,
-                                                 thin_walls=args.thin_walls), jobs=_jobs(args),
+                                              thin_walls=args.thin_walls, fill_holes=args.fill_holes),
+                           jobs=_jobs(args),
                            progress=not args.quiet)
     _print_run(report, args.out)
     if args.render or args.viewer:
@@ -268,6 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="material lost at the break: mating surfaces end this far apart / diagonal (default 0)")
     p.add_argument("--scale", type=_number, default=1.0,
                    help="scale the mesh first, e.g. 1000 for metres to millimetres (default 1)")
+    _add_fill_holes(p)
     p.set_defaults(func=_cmd_break)
 
     p = sub.add_parser(
@@ -293,6 +317,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "from the covariance of ball and solid (robust to noise, unlike K2 from D2)")
     p.add_argument("--max-memory", type=_bytes, default=4e9,
                    help="working memory allowed for one grid, e.g. 4G (default)")
+    _add_fill_holes(p)
     p.set_defaults(func=_cmd_describe)
 
     p = sub.add_parser(
@@ -338,6 +363,7 @@ def _add_inputs(p) -> None:
     p.add_argument("--thin-walls", type=_thin_walls, default=None,
                    help="match as thin-walled sherds, along their break strips: 'auto' (default: when most "
                    "fragments are walls under 8 %% of their diagonal thick), 'yes' or 'no'")
+    _add_fill_holes(p)
     _add_common(p)
 
 

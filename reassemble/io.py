@@ -39,11 +39,14 @@ class MeshData:
     vertices : (n, 3) float64
     faces : (m, 3) int64, counter-clockwise seen from outside
     path : where it was read from
+    filled_holes : the extent of every hole closed on reading (``fill_holes``), a fraction
+        of the mesh's diagonal, largest first
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     path: Path
+    filled_holes: tuple[float, ...] = ()
 
 
 def bundled_meshes() -> dict[str, Path]:
@@ -65,7 +68,9 @@ def resolve_mesh_path(spec: str | os.PathLike) -> Path:
     raise ReassembleError(f"{spec}: no such file (nor a bundled mesh; bundled: {names})")
 
 
-def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: bool = True) -> MeshData:
+def load_mesh(
+    path: str | os.PathLike, *, require_closed: bool = True, weld: bool = True, fill_holes: float | None = None
+) -> MeshData:
     """Read a mesh file, weld coincident vertices and check it.
 
     Vertices are welded by position only, so OBJ files whose UV seams split vertices
@@ -80,6 +85,8 @@ def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: boo
         odd number of faces, inconsistent orientation (pinched edges of four faces pass)
     weld : weld and clean as above; ``False`` keeps vertices and faces exactly as stored
         (for files whose per-face data must stay aligned, such as puzzle fragments)
+    fill_holes : close holes (open scans) up to this extent, a fraction of the mesh's
+        diagonal, with flat patches (:func:`holes.fill_holes`); None refuses an open mesh
 
     Raises
     ------
@@ -123,6 +130,18 @@ def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: boo
         if len(mesh.faces) == 0:
             raise ReassembleError(f"{path}: all triangles are degenerate")
 
+    filled: tuple[float, ...] = ()
+    if require_closed and fill_holes is not None:
+        from .holes import fill_holes as close
+
+        vertices, faces, sizes = close(np.asarray(mesh.vertices), np.asarray(mesh.faces), max_size=fill_holes)
+        if sizes and sizes[0] > fill_holes:
+            raise ReassembleError(
+                f"{path}: has a hole spanning {sizes[0]:.0%} of its size, more than --fill-holes "
+                f"{fill_holes:g} closes (raise it, or fill the hole in a mesh editor)"
+            )
+        filled = tuple(sizes)
+        mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
     if require_closed:
         # a solid's surface: every edge crossed as often in one direction as in the other.
         # Edges where four faces meet (two sheets pinched together, as decimation leaves)
@@ -139,10 +158,9 @@ def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: boo
                 what.append(f"{n_open} boundary edges")
             if n_odd:
                 what.append(f"{n_odd} edges shared by an odd number of faces")
-            raise ReassembleError(
-                f"{path}: mesh is not closed after welding ({', '.join(what)}); "
-                "a watertight solid is needed: fill its holes first (open scans are not supported yet)"
-            )
+            hint = ("a watertight solid is needed: --fill-holes closes holes (an open scan)" if n_open and not n_odd
+                    else "a watertight solid is needed")
+            raise ReassembleError(f"{path}: mesh is not closed after welding ({', '.join(what)}); {hint}")
         if np.any(balance != 0):
             raise ReassembleError(f"{path}: inconsistent face orientation (not an oriented solid)")
         if mesh.volume < 0:
@@ -151,6 +169,7 @@ def load_mesh(path: str | os.PathLike, *, require_closed: bool = True, weld: boo
         vertices=np.asarray(mesh.vertices, dtype=np.float64).copy(),
         faces=np.asarray(mesh.faces, dtype=np.int64).copy(),
         path=path,
+        filled_holes=filled,
     )
 
 

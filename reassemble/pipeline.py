@@ -39,9 +39,11 @@ GROUND_TRUTH_FORMAT = "reassemble-ground-truth/1"
 
 
 def describe_to_file(
-    mesh: str | Path, out: str | Path, *, radii, relative: bool = False, params=None, force: bool = False
+    mesh: str | Path, out: str | Path, *, radii, relative: bool = False, params=None, force: bool = False,
+    fill_holes: float | None = None,
 ) -> dict:
-    """Integral invariants of a closed mesh at its (welded) vertices, written to an ``.npz``.
+    """Integral invariants of a closed mesh at its (welded) vertices, written to an ``.npz``;
+    ``fill_holes`` as in :func:`io.load_mesh` (the patches' vertices are described too).
 
     Returns a small summary (vertex count, radii in mesh units, timings).
     """
@@ -51,7 +53,7 @@ def describe_to_file(
     if out.exists() and not force:
         raise ReassembleError(f"{out}: file exists (use --force to replace it)")
     path = resolve_mesh_path(mesh)
-    data = load_mesh(path, require_closed=True)
+    data = load_mesh(path, require_closed=True, fill_holes=fill_holes)
     radii = np.asarray(radii, dtype=np.float64)
     diag = float(np.linalg.norm(np.ptp(data.vertices, axis=0)))
     if relative:
@@ -72,8 +74,11 @@ def _round(x: float) -> float:
     return float(f"{x:.12g}")
 
 
-def break_to_folder(mesh: str | Path, out: str | Path, *, params, seed: int, force: bool = False) -> Path:
-    """Break ``mesh`` (a path or a bundled mesh name) and write the puzzle to ``out``.
+def break_to_folder(
+    mesh: str | Path, out: str | Path, *, params, seed: int, force: bool = False, fill_holes: float | None = None
+) -> Path:
+    """Break ``mesh`` (a path or a bundled mesh name) and write the puzzle to ``out``;
+    ``fill_holes`` as in :func:`io.load_mesh` (an open scan closed before breaking).
 
     Writes ``out/fragments/<name>.ply``, ``out/labels.npz`` (per-face int8, 1 = fracture,
     one array per fragment name) and ``out/ground_truth.json``. The folder appears only
@@ -83,7 +88,7 @@ def break_to_folder(mesh: str | Path, out: str | Path, *, params, seed: int, for
 
     path = resolve_mesh_path(mesh)
     params.check()
-    data = load_mesh(path, require_closed=True)
+    data = load_mesh(path, require_closed=True, fill_holes=fill_holes)
     try:
         puzzle = break_mesh(data.vertices, data.faces, params, rng=np.random.default_rng(seed))
     except ReassembleError as exc:
@@ -209,6 +214,8 @@ class MatchConfig:
         is down to half that); their own vertices stay in every output
     thin_walls : match as thin-walled sherds along their break strips (:mod:`shells`): None
         when most fragments are (:func:`shells.is_thin_shell`), or always / never
+    fill_holes : close the holes of open scans up to this extent, a fraction of each mesh's
+        diagonal (:func:`holes.fill_holes`); None refuses an open mesh
     """
 
     radii: tuple[float, ...] = (0.02, 0.04, 0.08)
@@ -218,6 +225,7 @@ class MatchConfig:
     gap: float | None = None
     denoise: float = 0.2
     thin_walls: bool | None = None
+    fill_holes: float | None = None
 
 
 @dataclasses.dataclass
@@ -492,13 +500,17 @@ def match_set(
     return results, params
 
 
-def load_fragments(inputs: list[str | Path]) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:
+def load_fragments(
+    inputs: list[str | Path], *, fill_holes: float | None = None
+) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:
     """Read fragment meshes from files and folders; a bad file is skipped with a warning.
 
     Returns the meshes by name and the warnings (one line each). The name is the file
     stem; a file holding several separate bodies gives one fragment per body (``stem.1``,
     ``stem.2``, ... largest first; specks under 1 % of the largest's volume are dropped).
     A fragment identical to one already read (same welded vertices and faces) is skipped.
+    With ``fill_holes``, the holes of open scans are closed (see :func:`io.load_mesh`), with
+    a warning saying how many and how large.
     """
     from .io import MESH_SUFFIXES
 
@@ -517,10 +529,13 @@ def load_fragments(inputs: list[str | Path]) -> tuple[dict[str, tuple[np.ndarray
     meshes, warnings, digests = {}, [], {}
     for path in files:
         try:
-            whole = load_mesh(path, require_closed=True)
+            whole = load_mesh(path, require_closed=True, fill_holes=fill_holes)
         except ReassembleError as exc:
             warnings.append(f"skipped: {exc}")
             continue
+        if whole.filled_holes:
+            warnings.append(f"{path}: closed {len(whole.filled_holes)} hole(s), the largest "
+                            f"{whole.filled_holes[0]:.1%} of its size, with flat patches (an open scan)")
         bodies, debris = split_bodies(whole)
         if debris:
             warnings.append(f"{path}: dropped {debris} tiny separate piece(s) (each under "
@@ -617,7 +632,7 @@ def match_to_folder(
     from .segmentation import SegmentParams
 
     check_output_folder(out, force=force)  # before minutes of work, not after
-    meshes, warnings = load_fragments(inputs)
+    meshes, warnings = load_fragments(inputs, fill_holes=config.fill_holes)
     seg_params = SegmentParams()
     frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,
                                      progress=progress)
@@ -667,7 +682,7 @@ def run_to_folder(
     check_output_folder(out, force=force)  # before minutes of work, not after
     timings = {}
     t0 = time.perf_counter()
-    meshes, warnings = load_fragments(inputs)
+    meshes, warnings = load_fragments(inputs, fill_holes=config.fill_holes)
     seg_params = SegmentParams()
     assembly_params = assembly_params or AssemblyParams()
     frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,

@@ -93,6 +93,9 @@ def test_bad_options(tmp_path):
         assert_one_line_error(rc, err, "--gap", "auto")
     rc, _, err = run("run", tmp_path, "--thin-walls", "maybe", "--out", tmp_path / "o")
     assert_one_line_error(rc, err, "--thin-walls", "auto")
+    for bad in ("0", "2", "all"):
+        rc, _, err = run("run", tmp_path, "--fill-holes", bad, "--out", tmp_path / "o")
+        assert_one_line_error(rc, err, "--fill-holes", "fraction")
     assert not (tmp_path / "o").exists()
 
 

@@ -1,0 +1,105 @@
+"""Open scans: the Stanford bunny scan (holes in its base) and fragments scanned with holes.
+
+    python benchmarks/open_scan.py                       # ../shared/data/meshes/stanford-bunny-scan
+    python benchmarks/open_scan.py MESH --pieces 4,8 --seeds 0,1,2
+
+Two cases, each run with ``--fill-holes`` and scored with ``reassemble eval``:
+- the open scan closed (``holes.fill_holes``), broken into pieces (``reassemble break``),
+  and reassembled;
+- every fragment of those puzzles "scanned" with holes: a disc of its original surface
+  (radius ``--hole`` of the object's diagonal, at a seeded random place) removed, the
+  fragments reassembled from the open meshes (without ``--fill-holes`` all are refused).
+Prints per puzzle the holes closed, strict and Breaking Bad part accuracy, and time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import header  # noqa: E402
+
+DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "meshes" / "stanford-bunny-scan" / "stanford-bunny.obj"
+
+
+def punch_holes(puzzle_dir: Path, out: Path, *, radius: float, seed: int) -> None:
+    """Write every fragment of a puzzle with a disc of its original surface removed."""
+    from reassemble.io import write_ply
+    from reassemble.pipeline import read_puzzle
+
+    puzzle = read_puzzle(puzzle_dir / "ground_truth.json")
+    rng = np.random.default_rng(seed)
+    diag = float(puzzle.ground_truth["object"]["diagonal"])
+    out.mkdir()
+    for name, m in sorted(puzzle.meshes.items()):
+        centres = m.vertices[m.faces].mean(axis=1)
+        at = centres[rng.choice(np.flatnonzero(puzzle.labels[name] == 0))]
+        keep = np.linalg.norm(centres - at, axis=1) > radius * diag
+        used, faces = np.unique(m.faces[keep], return_inverse=True)
+        write_ply(out / f"{name}.ply", m.vertices[used], faces.reshape(-1, 3))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("mesh", type=Path, nargs="?", default=DEFAULT)
+    parser.add_argument("--pieces", default="4,8")
+    parser.add_argument("--seeds", default="0,1")
+    parser.add_argument("--hole", type=float, default=0.03, help="radius of the holes punched / diagonal")
+    parser.add_argument("--fill-holes", type=float, default=0.25)
+    parser.add_argument("--jobs", type=int, default=2)
+    args = parser.parse_args()
+    header()
+    from reassemble.errors import ReassembleError
+    from reassemble.io import load_mesh
+    from reassemble.pipeline import MatchConfig, break_to_folder, evaluate_files, run_to_folder
+    from reassemble.synth import BreakParams
+
+    scan = load_mesh(args.mesh, fill_holes=args.fill_holes)
+    print(f"{args.mesh.name}: {len(scan.faces)} faces after closing {len(scan.filled_holes)} holes (extent / "
+          f"diagonal: {', '.join(f'{s:.3f}' for s in scan.filled_holes)})")
+    print(f"{'puzzle':<24s} {'case':<22s} {'strict':>6s} {'BB':>6s} {'solved':>6s} {'time s':>7s}")
+    config = MatchConfig(fill_holes=args.fill_holes)
+    totals: dict[str, list] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for pieces in (int(x) for x in args.pieces.split(",")):
+            for seed in (int(x) for x in args.seeds.split(",")):
+                name = f"{args.mesh.stem}_{pieces}p_s{seed}"
+                puzzle = tmp / name
+                break_to_folder(args.mesh, puzzle, params=BreakParams(pieces=pieces), seed=seed,
+                                fill_holes=args.fill_holes)
+                scans = tmp / f"{name}_scans"
+                punch_holes(puzzle, scans, radius=args.hole, seed=seed)
+                try:
+                    run_to_folder([scans], tmp / f"{name}_refused", seed=seed)
+                    refused = False
+                except ReassembleError:
+                    refused = True
+                for case, folder in (("closed scan, broken", puzzle / "fragments"),
+                                     ("fragments with holes", scans)):
+                    out = tmp / f"{name}_{len(totals.get(case, []))}_{case.split()[0]}"
+                    t = time.perf_counter()
+                    run_to_folder([folder], out, seed=seed, config=config, jobs=args.jobs)
+                    elapsed = time.perf_counter() - t
+                    s = evaluate_files(out / "transforms.json", puzzle / "ground_truth.json",
+                                       seed=seed)["alignments"]["anchor_largest"]["summary"]
+                    totals.setdefault(case, []).append(s)
+                    print(f"{name:<24s} {case:<22s} {s['part_acc_strict']:>6.3f} {s['part_acc']:>6.3f} "
+                          f"{str(s['solved']):>6s} {elapsed:>7.1f}"
+                          + ("" if case.startswith("closed") else f"  (without --fill-holes: "
+                             f"{'refused' if refused else 'NOT refused'})"), flush=True)
+    for case, ss in totals.items():
+        print(f"{case}: strict part accuracy mean {np.mean([s['part_acc_strict'] for s in ss]):.3f}, "
+              f"solved {sum(s['solved'] for s in ss)} of {len(ss)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-EAR_CLIP_MAX = 500  # loops longer than this get the fan (ear clipping is quadratic in Python)
+EAR_CLIP_MAX = 2000  # loops longer than this get the fan (ear clipping is quadratic)
 
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
@@ -38,52 +38,47 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     loops = []
     for start in sorted(outgoing):
         while outgoing.get(start):
-            loop, at, v = [start], {start: 0}, outgoing[start].pop()
-            while outgoing.get(v) or v in at:
-                if v in at:  # back at a vertex of this walk: a loop closed (a pinch, or the start)
-                    k = at[v]
-                    if len(loop) - k >= 3:
-                        loops.append(np.array(loop[k:], dtype=np.int64))
-                    for u in loop[k + 1:]:
-                        del at[u]
-                    del loop[k + 1:]
-                    if v == start and not outgoing.get(v):
-                        break
-                else:
-                    at[v] = len(loop)
-                    loop.append(v)
-                if not outgoing.get(v):
-                    break
+            walk, at, v = [start], {start: 0}, start
+            while outgoing.get(v):
                 v = outgoing[v].pop()
+                if v in at:  # back at a vertex of this walk: a loop closed there
+                    k = at[v]
+                    if len(walk) - k >= 3:
+                        loops.append(np.array(walk[k:], dtype=np.int64))
+                    for u in walk[k + 1:]:
+                        del at[u]
+                    del walk[k + 1:]
+                else:
+                    at[v] = len(walk)
+                    walk.append(v)
     return loops
+
+
+def _turn(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """z of (b − a) × (c − a), broadcast over leading axes of 2-d points: > 0 turns left."""
+    return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
 
 
 def _ear_clip(points: np.ndarray) -> list[tuple[int, int, int]] | None:
     """Triangles (indices into ``points``, (k, 2), counter-clockwise) of a simple polygon, or None."""
-    idx = list(range(len(points)))
+    ring = np.arange(len(points))
     tris = []
-    while len(idx) > 3:
-        n = len(idx)
-        for k in range(n):
-            i, j, m = idx[k - 1], idx[k], idx[(k + 1) % n]
-            a, b, c = points[i], points[j], points[m]
-            if _cross(a, b, c[None])[0] <= 0:  # a reflex or flat corner is no ear
+    while len(ring) > 3:
+        p = points[ring]
+        prev, nxt = np.roll(p, 1, axis=0), np.roll(p, -1, axis=0)
+        n = len(ring)
+        for k in np.flatnonzero(_turn(prev, p, nxt) > 0):  # reflex and flat corners are no ears
+            others = np.delete(p, [(k - 1) % n, k, (k + 1) % n], axis=0)
+            a, b, c = prev[k], p[k], nxt[k]
+            if np.any((_turn(a, b, others) >= 0) & (_turn(b, c, others) >= 0) & (_turn(c, a, others) >= 0)):
                 continue
-            p = points[[q for q in idx if q not in (i, j, m)]]
-            if len(p) and np.any((_cross(a, b, p) >= 0) & (_cross(b, c, p) >= 0) & (_cross(c, a, p) >= 0)):
-                continue
-            tris.append((i, j, m))
-            idx.pop(k)
+            tris.append((int(ring[(k - 1) % n]), int(ring[k]), int(ring[(k + 1) % n])))
+            ring = np.delete(ring, k)
             break
         else:  # no ear: not a simple polygon after all
             return None
-    tris.append((idx[0], idx[1], idx[2]))
+    tris.append(tuple(int(q) for q in ring))
     return tris
-
-
-def _cross(o: np.ndarray, a: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """(n,) z of (a − o) × (p − o) for points p (n, 2)."""
-    return (a[0] - o[0]) * (p[:, 1] - o[1]) - (a[1] - o[1]) * (p[:, 0] - o[0])
 
 
 def _self_crossing(points: np.ndarray) -> bool:
@@ -92,12 +87,8 @@ def _self_crossing(points: np.ndarray) -> bool:
     a, b = points, np.roll(points, -1, axis=0)
     for i in range(k - 2):
         j = np.arange(i + 2, k if i > 0 else k - 1)  # the edges not next to edge i
-        if len(j) == 0:
-            continue
-        d1, d2 = _cross(a[i], b[i], a[j]), _cross(a[i], b[i], b[j])
-        e1 = (b[j, 0] - a[j, 0]) * (a[i, 1] - a[j, 1]) - (b[j, 1] - a[j, 1]) * (a[i, 0] - a[j, 0])
-        e2 = (b[j, 0] - a[j, 0]) * (b[i, 1] - a[j, 1]) - (b[j, 1] - a[j, 1]) * (b[i, 0] - a[j, 0])
-        if np.any((d1 * d2 < 0) & (e1 * e2 < 0)):
+        if len(j) and np.any((_turn(a[i], b[i], a[j]) * _turn(a[i], b[i], b[j]) < 0)
+                             & (_turn(a[j], b[j], a[i]) * _turn(a[j], b[j], b[i]) < 0)):
             return True
     return False
 

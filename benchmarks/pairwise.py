@@ -41,16 +41,17 @@ def errors(T: np.ndarray, T_true: np.ndarray, centre: np.ndarray, diag: float) -
     return rot, t
 
 
-def run_puzzle(gt_path: str, baseline: bool, seed: int) -> dict:
+def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | None = None) -> dict:
     from sklearn.metrics import f1_score
 
     from reassemble.geometry import face_areas, invert_transform
-    from reassemble.pipeline import match_pairs, prepare_fragments, read_puzzle
+    from reassemble.pipeline import MatchConfig, match_pairs, prepare_fragments, read_puzzle
 
     puzzle = read_puzzle(gt_path)
     gt = puzzle.ground_truth
     t = time.perf_counter()
-    frags, size = prepare_fragments({n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}, seed=seed)
+    frags, size = prepare_fragments({n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}, seed=seed,
+                                    config=MatchConfig(signature_radii=signature_radii))
     t_prepare = time.perf_counter() - t
     labels = np.concatenate([puzzle.labels[f.name] for f in frags])
     pred = np.concatenate([f.segmentation.fracture for f in frags])
@@ -114,6 +115,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_selection(parser, pieces="2,4,8")
     parser.add_argument("--no-baseline", action="store_true")
+    parser.add_argument("--signature-radii", type=int, default=None,
+                        help="signatures from this many of the finest descriptor radii (MatchConfig; default all)")
     args = parser.parse_args()
     header()
     specs = select(args)
@@ -126,7 +129,7 @@ def main() -> int:
     with ProcessPoolExecutor(args.jobs) as pool:
         results = []
         for spec, r in zip(specs, pool.map(run_puzzle, paths, [not args.no_baseline] * len(paths),
-                                           [args.seed] * len(paths))):
+                                           [args.seed] * len(paths), [args.signature_radii] * len(paths))):
             results.append(r)
             report_puzzle(r)
     groups: dict[str, list] = {"all": [], "clean": [], "noisy": []}

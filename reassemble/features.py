@@ -60,10 +60,12 @@ def offset_surface(surface: FractureSurface, distance: float) -> FractureSurface
                                keypoints=surface.keypoints + distance * surface.keypoint_normals)
 
 
-def signature(descriptors) -> np.ndarray:
-    """(n, 2m) signature from Descriptors with ``principal``: H_rob r, then |κ1 − κ2| r."""
-    r = descriptors.radii[None, :]
-    return np.hstack([descriptors.H_rob * r, np.sqrt(np.maximum(descriptors.K2_cov, 0.0)) * r])
+def signature(descriptors, *, radii: int | None = None) -> np.ndarray:
+    """(n, 2m) signature from Descriptors with ``principal``: H_rob r, then |κ1 − κ2| r, at
+    the finest ``radii`` radii (m of them; None: all)."""
+    m = len(descriptors.radii) if radii is None else radii
+    r = descriptors.radii[None, :m]
+    return np.hstack([descriptors.H_rob[:, :m] * r, np.sqrt(np.maximum(descriptors.K2_cov[:, :m], 0.0)) * r])
 
 
 def mate_signature(sig: np.ndarray) -> np.ndarray:
@@ -108,6 +110,7 @@ def fracture_surface(
     *,
     spacing: float,
     n_samples: int = 4000,
+    signature_radii: int | None = None,
     rng: np.random.Generator,
 ) -> FractureSurface:
     """Keypoints, signatures and samples of one fragment's fracture surface.
@@ -119,11 +122,13 @@ def fracture_surface(
     descriptors : Descriptors at the face centres, with ``principal``
     spacing : keypoint spacing (mesh units)
     n_samples : samples of the fracture surface, and of the whole surface
+    signature_radii : the signatures use this many of the finest radii (None: all)
     rng : numpy Generator for the sampling
     """
     fracture = np.flatnonzero(segmentation.fracture)
     if len(fracture) == 0:
-        return empty_surface(vertices, faces, n_radii=len(descriptors.radii), n_samples=n_samples, rng=rng)
+        n_radii = len(descriptors.radii) if signature_radii is None else signature_radii
+        return empty_surface(vertices, faces, n_radii=n_radii, n_samples=n_samples, rng=rng)
     area = face_areas(vertices, faces)
     total = float(area.sum())
     surface, _ = sample_surface(vertices, faces, n_samples, rng=rng)
@@ -137,7 +142,7 @@ def fracture_surface(
     return FractureSurface(
         keypoints=vertices[faces[keep]].mean(axis=1),
         keypoint_normals=normals,
-        signature=signature(descriptors)[keep],
+        signature=signature(descriptors, radii=signature_radii)[keep],
         samples=samples,
         sample_normals=face_normals(vertices, sub)[which],
         sample_area=frac_area / n_samples,

@@ -216,6 +216,8 @@ class MatchConfig:
         when most fragments are (:func:`shells.is_thin_shell`), or always / never
     fill_holes : close the holes of open scans up to this extent, a fraction of each mesh's
         diagonal (:func:`holes.fill_holes`); None refuses an open mesh
+    signature_radii : the fracture signatures use this many of the finest ``radii``
+        (None: all of them)
     """
 
     radii: tuple[float, ...] = (0.02, 0.04, 0.08)
@@ -226,6 +228,7 @@ class MatchConfig:
     denoise: float = 0.2
     thin_walls: bool | None = None
     fill_holes: float | None = None
+    signature_radii: int | None = None
 
 
 @dataclasses.dataclass
@@ -330,6 +333,9 @@ def prepare_fragments(
     from .geometry import vertex_noise
     from .shells import is_thin_shell, strip_frames, strip_segmentation, wall_thickness
 
+    if config.signature_radii is not None and not 1 <= config.signature_radii <= len(config.radii):
+        raise ReassembleError(f"signature_radii must be 1 to {len(config.radii)} (the descriptor radii), "
+                              f"got {config.signature_radii}")
     names = sorted(meshes)
     pairs = [meshes[n] for n in names]
     size = reference_size(pairs)
@@ -380,10 +386,12 @@ def prepare_fragments(
         if s is None:
             s = Segmentation(np.zeros(len(f), bool), np.zeros(len(f)), np.zeros(len(f), int),
                              np.full(len(f), -1), 0.0, float(face_areas(v, f).sum()))
-            surf = empty_surface(v, f, n_radii=len(radii), n_samples=config.samples, rng=rng)
+            surf = empty_surface(v, f, n_radii=config.signature_radii or len(radii), n_samples=config.samples,
+                                 rng=rng)
             log.warning("%s: %s", name, notes[name])
         else:
-            surf = fracture_surface(v, f, s, d, spacing=spacing, n_samples=config.samples, rng=rng)
+            surf = fracture_surface(v, f, s, d, spacing=spacing, n_samples=config.samples,
+                                    signature_radii=config.signature_radii, rng=rng)
             if shell and len(surf.keypoints):
                 n, t = strip_frames(v, f, thickness[k], surf.keypoints, surf.keypoint_normals)
                 surf = dataclasses.replace(surf, keypoint_normals=n, keypoint_tangents=t)

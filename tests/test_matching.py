@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from reassemble.features import mate_signature
+from reassemble.features import mate_signature, signature
 from reassemble.geometry import face_areas, invert_transform, make_transform, random_rotation, rotation_angle_deg
-from reassemble.pipeline import match_pairs, prepare_fragments
+from reassemble.errors import ReassembleError
+from reassemble.pipeline import MatchConfig, match_pairs, prepare_fragments
 from reassemble.registration import kabsch
 from reassemble.geometry import face_adjacency
 from reassemble.segmentation import make_patches
@@ -159,3 +160,13 @@ def test_segmentation_retries_on_smoothed_geometry_only_when_the_break_is_a_sliv
     out = seg.segment([(None, None)], [None], size=1.0)
     assert out[0].fracture_area == shares[expected]
     assert calls == ([0, seg.SegmentParams().noise_smoothing] if shares[0] < 0.1 else [0])
+
+
+def test_signature_from_the_finest_radii(prepared):
+    frags, _ = prepared
+    d = frags[0].descriptors
+    full, m = signature(d), len(d.radii)
+    np.testing.assert_array_equal(signature(d, radii=m), full)
+    np.testing.assert_array_equal(signature(d, radii=1), full[:, [0, m]])
+    with pytest.raises(ReassembleError, match="signature_radii"):
+        prepare_fragments({f.name: (f.vertices, f.faces) for f in frags}, config=MatchConfig(signature_radii=4))

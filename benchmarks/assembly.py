@@ -34,14 +34,15 @@ from benchmarks.common import add_selection, header, select  # noqa: E402
 ALIGN = "anchor_largest"
 
 
-def run_puzzle(gt_path: str, baseline: bool, seed: int) -> dict:
+def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | None = None) -> dict:
     from reassemble.metrics import ScoringFragment, evaluate
-    from reassemble.pipeline import evaluate_files, read_puzzle, reference_size, run_to_folder
+    from reassemble.pipeline import MatchConfig, evaluate_files, read_puzzle, reference_size, run_to_folder
 
     gt_path = Path(gt_path)
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
-        report = run_to_folder([gt_path.parent / "fragments"], Path(tmp) / "out", seed=seed)
+        report = run_to_folder([gt_path.parent / "fragments"], Path(tmp) / "out", seed=seed,
+                               config=MatchConfig(signature_radii=signature_radii))
         elapsed = time.perf_counter() - t
         score = evaluate_files(Path(tmp) / "out" / "transforms.json", gt_path)
     out = {"name": gt_path.parent.name, "fragments": report["summary"]["fragments"],
@@ -103,6 +104,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_selection(parser, pieces="2,4,8,12,20")
     parser.add_argument("--no-baseline", action="store_true")
+    parser.add_argument("--signature-radii", type=int, default=None,
+                        help="signatures from this many of the finest descriptor radii (MatchConfig; default all)")
     parser.add_argument("--baseline-max-pieces", type=int, default=12,
                         help="run the baseline on puzzles of at most this many pieces (default 12: it takes "
                         "about 300 s on a 20-piece puzzle)")
@@ -120,7 +123,7 @@ def main() -> int:
     results = []
     with ProcessPoolExecutor(args.jobs) as pool:
         baseline = [not args.no_baseline and s.pieces <= args.baseline_max_pieces for s in specs]
-        for r in pool.map(run_puzzle, paths, baseline, [args.seed] * len(paths)):
+        for r in pool.map(run_puzzle, paths, baseline, [args.seed] * len(paths), [args.signature_radii] * len(paths)):
             results.append(r)
             report_puzzle(r)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")

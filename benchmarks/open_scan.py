@@ -84,7 +84,7 @@ def main() -> int:
                     refused = True
                 for case, folder in (("closed scan, broken", puzzle / "fragments"),
                                      ("fragments with holes", scans)):
-                    out = tmp / f"{name}_{len(totals.get(case, []))}_{case.split()[0]}"
+                    out = tmp / f"{name}_{case.split()[0]}"
                     t = time.perf_counter()
                     run_to_folder([folder], out, seed=seed, config=config, jobs=args.jobs)
                     elapsed = time.perf_counter() - t

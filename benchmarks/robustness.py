@@ -31,16 +31,17 @@ MESHES = "spot,fish_low_resolution,torus,wingnut,angle_block,featuretype"
 
 
 def run_one(task) -> dict:
-    from reassemble.pipeline import break_to_folder, evaluate_files, run_to_folder
+    from reassemble.pipeline import MatchConfig, break_to_folder, evaluate_files, run_to_folder
     from reassemble.synth import BreakParams
 
-    mesh, pieces, kind, level, seed = task
+    mesh, pieces, kind, level, seed, signature_radii = task
     params = BreakParams(pieces=pieces, **{kind: level})
     with tempfile.TemporaryDirectory() as tmp:
         puzzle = Path(tmp) / "puzzle"
         break_to_folder(mesh, puzzle, params=params, seed=seed)
         t = time.perf_counter()
-        run_to_folder([puzzle / "fragments"], Path(tmp) / "out", seed=seed)
+        run_to_folder([puzzle / "fragments"], Path(tmp) / "out", seed=seed,
+                      config=MatchConfig(signature_radii=signature_radii))
         elapsed = time.perf_counter() - t
         s = evaluate_files(Path(tmp) / "out" / "transforms.json", puzzle / "ground_truth.json")
     s = s["alignments"]["anchor_largest"]["summary"]
@@ -57,9 +58,11 @@ def main() -> int:
     parser.add_argument("--decimate", default="0.002,0.005", help="decimation tolerances / diagonal")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once")
+    parser.add_argument("--signature-radii", type=int, default=None,
+                        help="signatures from this many of the finest descriptor radii (MatchConfig; default all)")
     args = parser.parse_args()
     header()
-    tasks = [(m, int(p), kind, float(level), args.seed)
+    tasks = [(m, int(p), kind, float(level), args.seed, args.signature_radii)
              for kind, levels in (("noise", args.noise), ("gap", args.gaps), ("decimate", args.decimate))
              for level in levels.split(",") if level
              for p in args.pieces.split(",") for m in args.meshes.split(",")]

@@ -25,25 +25,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import header  # noqa: E402
+from data_synth.scans import punch_holes  # noqa: E402
 
 DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "meshes" / "stanford-bunny-scan" / "stanford-bunny.obj"
-
-
-def punch_holes(puzzle_dir: Path, out: Path, *, radius: float, seed: int) -> None:
-    """Write every fragment of a puzzle with a disc of its original surface removed."""
-    from reassemble.io import write_ply
-    from reassemble.pipeline import read_puzzle
-
-    puzzle = read_puzzle(puzzle_dir / "ground_truth.json")
-    rng = np.random.default_rng(seed)
-    diag = float(puzzle.ground_truth["object"]["diagonal"])
-    out.mkdir()
-    for name, m in sorted(puzzle.meshes.items()):
-        centres = m.vertices[m.faces].mean(axis=1)
-        at = centres[rng.choice(np.flatnonzero(puzzle.labels[name] == 0))]
-        keep = np.linalg.norm(centres - at, axis=1) > radius * diag
-        used, faces = np.unique(m.faces[keep], return_inverse=True)
-        write_ply(out / f"{name}.ply", m.vertices[used], faces.reshape(-1, 3))
 
 
 def main() -> int:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from data_synth.scans import punch_holes
 from reassemble.errors import ReassembleError
 from reassemble.holes import boundary_loops, fill_holes
 from reassemble.io import load_mesh, write_ply
@@ -83,17 +84,8 @@ def test_the_loader_refuses_an_open_scan_or_closes_it(tmp_path):
 def test_open_scanned_fragments_are_reassembled(puzzle_dir, tmp_path):
     """Each fragment of the cow loses a patch of its original surface (an open scan)."""
     puzzle = read_puzzle(puzzle_dir / "ground_truth.json")
-    rng = np.random.default_rng(3)
     scans = tmp_path / "scans"
-    scans.mkdir()
-    diag = float(puzzle.ground_truth["object"]["diagonal"])
-    for name, m in puzzle.meshes.items():
-        centres = m.vertices[m.faces].mean(axis=1)
-        original = np.flatnonzero(puzzle.labels[name] == 0)
-        at = centres[rng.choice(original)]
-        keep = np.linalg.norm(centres - at, axis=1) > 0.03 * diag
-        used, faces = np.unique(m.faces[keep], return_inverse=True)
-        write_ply(scans / f"{name}.ply", m.vertices[used], faces.reshape(-1, 3))
+    punch_holes(puzzle_dir, scans, radius=0.03, seed=3)
     with pytest.raises(ReassembleError, match="at least two readable fragments"):
         run_to_folder([scans], tmp_path / "refused", seed=0)
     assert not (tmp_path / "refused").exists()

@@ -29,20 +29,20 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import add_selection, header, select  # noqa: E402
+from benchmarks.common import add_selection, add_signature_radii, header, match_config, select  # noqa: E402
 
 ALIGN = "anchor_largest"
 
 
 def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | None = None) -> dict:
     from reassemble.metrics import ScoringFragment, evaluate
-    from reassemble.pipeline import MatchConfig, evaluate_files, read_puzzle, reference_size, run_to_folder
+    from reassemble.pipeline import evaluate_files, read_puzzle, reference_size, run_to_folder
 
     gt_path = Path(gt_path)
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
         report = run_to_folder([gt_path.parent / "fragments"], Path(tmp) / "out", seed=seed,
-                               config=MatchConfig(signature_radii=signature_radii))
+                               config=match_config(signature_radii))
         elapsed = time.perf_counter() - t
         score = evaluate_files(Path(tmp) / "out" / "transforms.json", gt_path)
     out = {"name": gt_path.parent.name, "fragments": report["summary"]["fragments"],
@@ -104,8 +104,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_selection(parser, pieces="2,4,8,12,20")
     parser.add_argument("--no-baseline", action="store_true")
-    parser.add_argument("--signature-radii", type=int, default=None,
-                        help="signatures from this many of the finest descriptor radii (MatchConfig; default all)")
+    add_signature_radii(parser)
     parser.add_argument("--baseline-max-pieces", type=int, default=12,
                         help="run the baseline on puzzles of at most this many pieces (default 12: it takes "
                         "about 300 s on a 20-piece puzzle)")

@@ -61,3 +61,16 @@ def select(args) -> list:
     return [s for s in SETS[args.set]() if s.pieces in pieces and s.seed in seeds
             and (meshes is None or s.mesh in meshes) and not (args.clean_only and s.noise)
             and not (args.noisy_only and not s.noise)]
+
+
+def add_signature_radii(parser) -> None:
+    parser.add_argument("--signature-radii", type=int, default=None,
+                        help="signatures from this many of the finest descriptor radii "
+                        "(MatchConfig.signature_radii; default MatchConfig's)")
+
+
+def match_config(signature_radii: int | None):
+    """MatchConfig with the benchmark's --signature-radii, or the default one."""
+    from reassemble.pipeline import MatchConfig
+
+    return MatchConfig() if signature_radii is None else MatchConfig(signature_radii=signature_radii)

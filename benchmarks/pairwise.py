@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import add_selection, header, select  # noqa: E402
+from benchmarks.common import add_selection, add_signature_radii, header, match_config, select  # noqa: E402
 
 MIN_CONTACT = 0.05
 
@@ -45,13 +45,13 @@ def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | N
     from sklearn.metrics import f1_score
 
     from reassemble.geometry import face_areas, invert_transform
-    from reassemble.pipeline import MatchConfig, match_pairs, prepare_fragments, read_puzzle
+    from reassemble.pipeline import match_pairs, prepare_fragments, read_puzzle
 
     puzzle = read_puzzle(gt_path)
     gt = puzzle.ground_truth
     t = time.perf_counter()
     frags, size = prepare_fragments({n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}, seed=seed,
-                                    config=MatchConfig(signature_radii=signature_radii))
+                                    config=match_config(signature_radii))
     t_prepare = time.perf_counter() - t
     labels = np.concatenate([puzzle.labels[f.name] for f in frags])
     pred = np.concatenate([f.segmentation.fracture for f in frags])
@@ -115,8 +115,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_selection(parser, pieces="2,4,8")
     parser.add_argument("--no-baseline", action="store_true")
-    parser.add_argument("--signature-radii", type=int, default=None,
-                        help="signatures from this many of the finest descriptor radii (MatchConfig; default all)")
+    add_signature_radii(parser)
     args = parser.parse_args()
     header()
     specs = select(args)

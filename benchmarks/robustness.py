@@ -25,13 +25,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import header  # noqa: E402
+from benchmarks.common import add_signature_radii, header, match_config  # noqa: E402
 
 MESHES = "spot,fish_low_resolution,torus,wingnut,angle_block,featuretype"
 
 
 def run_one(task) -> dict:
-    from reassemble.pipeline import MatchConfig, break_to_folder, evaluate_files, run_to_folder
+    from reassemble.pipeline import break_to_folder, evaluate_files, run_to_folder
     from reassemble.synth import BreakParams
 
     mesh, pieces, kind, level, seed, signature_radii = task
@@ -41,7 +41,7 @@ def run_one(task) -> dict:
         break_to_folder(mesh, puzzle, params=params, seed=seed)
         t = time.perf_counter()
         run_to_folder([puzzle / "fragments"], Path(tmp) / "out", seed=seed,
-                      config=MatchConfig(signature_radii=signature_radii))
+                      config=match_config(signature_radii))
         elapsed = time.perf_counter() - t
         s = evaluate_files(Path(tmp) / "out" / "transforms.json", puzzle / "ground_truth.json")
     s = s["alignments"]["anchor_largest"]["summary"]
@@ -58,8 +58,7 @@ def main() -> int:
     parser.add_argument("--decimate", default="0.002,0.005", help="decimation tolerances / diagonal")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once")
-    parser.add_argument("--signature-radii", type=int, default=None,
-                        help="signatures from this many of the finest descriptor radii (MatchConfig; default all)")
+    add_signature_radii(parser)
     args = parser.parse_args()
     header()
     tasks = [(m, int(p), kind, float(level), args.seed, args.signature_radii)

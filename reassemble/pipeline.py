@@ -216,8 +216,10 @@ class MatchConfig:
         when most fragments are (:func:`shells.is_thin_shell`), or always / never
     fill_holes : close the holes of open scans up to this extent, a fraction of each mesh's
         diagonal (:func:`holes.fill_holes`); None refuses an open mesh
-    signature_radii : the fracture signatures use this many of the finest ``radii``
-        (None: all of them)
+    signature_radii : the fracture signatures use this many of the finest ``radii`` (None:
+        all of them); two by default: the coarsest ball reaches past a small contact into
+        the air and other fragments, and with it the signatures of small mating faces
+        disagree (``benchmarks/pairwise.py --signature-radii``)
     """
 
     radii: tuple[float, ...] = (0.02, 0.04, 0.08)
@@ -228,7 +230,7 @@ class MatchConfig:
     denoise: float = 0.2
     thin_walls: bool | None = None
     fill_holes: float | None = None
-    signature_radii: int | None = None
+    signature_radii: int | None = 2
 
 
 @dataclasses.dataclass

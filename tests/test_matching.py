@@ -6,10 +6,11 @@ import pytest
 from reassemble.features import mate_signature, signature
 from reassemble.geometry import face_areas, invert_transform, make_transform, random_rotation, rotation_angle_deg
 from reassemble.errors import ReassembleError
-from reassemble.pipeline import MatchConfig, match_pairs, prepare_fragments
+from reassemble.pipeline import MatchConfig, break_to_folder, match_pairs, prepare_fragments, read_puzzle
 from reassemble.registration import kabsch
 from reassemble.geometry import face_adjacency
 from reassemble.segmentation import make_patches
+from reassemble.synth import BreakParams
 
 
 @pytest.fixture(scope="module")
@@ -170,3 +171,16 @@ def test_signature_from_the_finest_radii(prepared):
     np.testing.assert_array_equal(signature(d, radii=1), full[:, [0, m]])
     with pytest.raises(ReassembleError, match="signature_radii"):
         prepare_fragments({f.name: (f.vertices, f.faces) for f in frags}, config=MatchConfig(signature_radii=4))
+
+
+def test_segmentation_of_a_noisy_cad_part(tmp_path):
+    # scan noise spread the angle block's flat faces over two mixture components, and the
+    # one nearer the break in mean was labelled fracture too (F1 0.70; now 0.97 in the bench)
+    out = tmp_path / "block"
+    break_to_folder("angle_block", out, params=BreakParams(pieces=4, noise=0.001), seed=0)
+    puzzle = read_puzzle(out / "ground_truth.json")
+    frags, _ = prepare_fragments({n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()})
+    labels = np.concatenate([puzzle.labels[f.name] for f in frags])
+    pred = np.concatenate([f.segmentation.fracture for f in frags])
+    area = np.concatenate([face_areas(f.vertices, f.faces) for f in frags])
+    assert f1(labels, pred, area) > 0.9

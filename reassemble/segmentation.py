@@ -15,10 +15,11 @@ Measured on the bench set (``benchmarks/pairwise.py``), the decisive cues are:
 The two roughness scores are standardized over all fragments of a set, averaged, and
 split by a Gaussian mixture (two or three components by BIC; the roughest is fracture,
 and a middle one overlapping it; exact quadric patches, e.g. CAD faces, are original and
-left out of the fit): the threshold comes from the data, not from the object. Patches too
-small for a quadric fit carry no evidence and take their neighbours' label. A graph cut on the patch graph (boundary length, weighted by how smooth the
-boundary is) then removes isolated patches: adjacent patches on one smooth sheet take one
-label, a sharp edge costs little to cut.
+left out of the fit): the threshold comes from the data, not from the object. A graph
+cut on the patch graph (boundary length, weighted by how smooth the boundary is) then
+removes isolated patches: adjacent patches on one smooth sheet take one label, a sharp
+edge costs little to cut; patches too small for a quadric fit carry no evidence and take
+their neighbours' label.
 """
 
 from __future__ import annotations

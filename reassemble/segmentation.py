@@ -248,31 +248,14 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
     pick = rng.choice(len(pooled), size=min(5000, 4 * int(informative.sum())), p=w / w.sum())
     state = int(rng.integers(2**31))
     fits = [GaussianMixture(k, random_state=state).fit(pooled[pick, None]) for k in (2, 3)]
-    # two or three components by BIC; the roughest is fracture, and the middle one too when
-    # nearer to it: where the original surface is itself two kinds (thin curved parts and
-    # broad faces: wingnut, CAD), two components split those, not fracture from original
-    # (2 pieces: F1 0.58 -> 0.999 on wingnut); where the fracture is two kinds, the middle
-    # one belongs to it
+    # two or three components by BIC: where the original surface is itself two kinds (thin
+    # curved parts and broad faces: wingnut, CAD), two components split those, not fracture
+    # from original (2 pieces: F1 0.58 -> 0.999 on wingnut)
     fits.sort(key=lambda g: g.bic(pooled[pick, None]))
+    scores_in, weights_in = pooled[informative], weights[informative]
 
-    def fracture_components(gmm) -> tuple[list[int], float]:
-        means, sds = gmm.means_[:, 0], np.sqrt(gmm.covariances_.ravel())
-        order = np.argsort(means)
-        rough = [int(order[-1])]
-        if len(order) == 3 and means[order[2]] - means[order[1]] < MERGE_SDS * max(sds[order[2]], sds[order[1]]):
-            # the middle component overlaps the roughest: one kind of fracture split in two.
-            # Judged by nearness of the means alone, noisy original surface spread over two
-            # components joined the break (noisy angle block 4 pieces: F1 0.70 -> 0.97)
-            rough.append(int(order[1]))
-        # a break is not a sliver: when the roughest component holds a tiny share of the
-        # area it is the rims and spikes of a noisy surface and the fracture lies in the
-        # next one (noisy cow, 4 pieces: 4-5 % labelled on every fragment, 7-52 % true)
-        while True:
-            share = float(np.average(gmm.predict_proba(pooled[informative, None])[:, rough].sum(axis=1) > 0.5,
-                                     weights=weights[informative]))
-            if share >= params.min_fracture_share or len(rough) == len(order) - 1:
-                return rough, share
-            rough.append(int(order[-1 - len(rough)]))
+    def fracture_components(gmm):
+        return _fracture_components(gmm, scores_in, weights_in, min_share=params.min_fracture_share)
 
     # the fit with the better BIC, unless only the other one gives a break of some size
     gmm, (rough, share) = fits[0], fracture_components(fits[0])
@@ -309,6 +292,33 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
             fracture_area=float(f.face_area[fracture].sum()), area=float(f.face_area.sum()),
         ))
     return out
+
+
+def _fracture_components(gmm, scores: np.ndarray, weights: np.ndarray, *, min_share: float) -> tuple[list[int], float]:
+    """The mixture components that are fracture, and the share of the area they take.
+
+    Parameters
+    ----------
+    gmm : fitted 1-d ``GaussianMixture`` of the patch scores (rougher is higher)
+    scores, weights : (p,) patch scores and areas the share is measured on
+    min_share : a break is not a sliver: below this share the next roughest joins
+    """
+    means, sds = gmm.means_[:, 0], np.sqrt(gmm.covariances_.ravel())
+    order = np.argsort(means)
+    rough = [int(order[-1])]
+    if len(order) == 3 and means[order[2]] - means[order[1]] < MERGE_SDS * max(sds[order[2]], sds[order[1]]):
+        # the middle component overlaps the roughest: one kind of fracture split in two.
+        # Judged by nearness of the means alone, noisy original surface spread over two
+        # components joined the break (noisy angle block 4 pieces: F1 0.70 -> 0.97)
+        rough.append(int(order[1]))
+    # when the roughest component holds a tiny share of the area it is the rims and spikes
+    # of a noisy surface and the fracture lies in the next one (noisy cow, 4 pieces: 4-5 %
+    # labelled on every fragment, 7-52 % true)
+    while True:
+        share = float(np.average(gmm.predict_proba(scores[:, None])[:, rough].sum(axis=1) > 0.5, weights=weights))
+        if share >= min_share or len(rough) == len(order) - 1:
+            return rough, share
+        rough.append(int(order[-1 - len(rough)]))
 
 
 def _graph_cut(f: _Fragment, prob: np.ndarray, params: SegmentParams, *, weight: float) -> np.ndarray:

@@ -9,6 +9,7 @@ from reassemble.errors import ReassembleError
 from reassemble.pipeline import MatchConfig, break_to_folder, match_pairs, prepare_fragments, read_puzzle
 from reassemble.registration import kabsch
 from reassemble.geometry import face_adjacency
+from reassemble import segmentation as seg
 from reassemble.segmentation import make_patches
 from reassemble.synth import BreakParams
 
@@ -173,9 +174,34 @@ def test_signature_from_the_finest_radii(prepared):
         prepare_fragments({f.name: (f.vertices, f.faces) for f in frags}, config=MatchConfig(signature_radii=4))
 
 
+def _mixture(means, sds, weights):
+    from sklearn.mixture import GaussianMixture
+
+    gmm = GaussianMixture(len(means))
+    gmm.weights_ = np.asarray(weights, float)
+    gmm.means_ = np.asarray(means, float)[:, None]
+    gmm.covariances_ = np.asarray(sds, float)[:, None, None] ** 2
+    gmm.precisions_cholesky_ = 1.0 / np.asarray(sds, float)[:, None, None]
+    return gmm
+
+
+@pytest.mark.parametrize("case", ["noisy original in two", "fracture in two"])
+def test_middle_mixture_component_joins_the_break_only_when_it_overlaps_it(case, rng):
+    # the components fitted on the noisy and the clean angle block in 4 pieces (2026-12-01 set)
+    if case == "noisy original in two":  # means 1.11 apart, sds 0.18 / 0.31: two kinds
+        means, sds, weights, fracture = [-1.63, -0.32, 0.79], [0.32, 0.31, 0.18], [0.05, 0.35, 0.6], [2]
+    else:  # 0.05 apart: one kind split in two
+        means, sds, weights, fracture = [-0.94, 0.66, 0.71], [0.42, 0.27, 0.11], [0.11, 0.35, 0.54], [1, 2]
+    gmm = _mixture(means, sds, weights)
+    counts = rng.multinomial(4000, weights)
+    scores = np.concatenate([rng.normal(m, s, n) for m, s, n in zip(means, sds, counts)])
+    rough, share = seg._fracture_components(gmm, scores, np.ones(len(scores)), min_share=0.1)
+    assert sorted(rough) == fracture
+    assert share == pytest.approx(sum(weights[k] for k in fracture), abs=0.05)
+
+
 def test_segmentation_of_a_noisy_cad_part(tmp_path):
-    # scan noise spread the angle block's flat faces over two mixture components, and the
-    # one nearer the break in mean was labelled fracture too (F1 0.70; now 0.97 in the bench)
+    # guards the noisy CAD case end to end (bench, angle block 4 pieces with noise: F1 0.935)
     out = tmp_path / "block"
     break_to_folder("angle_block", out, params=BreakParams(pieces=4, noise=0.001), seed=0)
     puzzle = read_puzzle(out / "ground_truth.json")

@@ -16,6 +16,13 @@ def test_smoke_set_builds_and_resumes(tmp_path):
         assert len(gt["fragments"]) == entry["pieces"]
     again = build_set("smoke", tmp_path)
     assert all(r["cached"] for r in again)
+    # a puzzle made by another generator version (here: a parameter renamed) is rebuilt
+    gt_path = tmp_path / index["puzzles"][0]["ground_truth"]
+    gt = json.loads(gt_path.read_text())
+    gt["parameters"]["resolution"] = gt["parameters"].pop("cut_edge")
+    gt_path.write_text(json.dumps(gt))
+    third = {r["name"]: r["cached"] for r in build_set("smoke", tmp_path)}
+    assert not third[index["puzzles"][0]["name"]] and sum(third.values()) == len(third) - 1
 
 
 def test_bench_set_spans_characters_and_sizes():

@@ -338,6 +338,7 @@ def prepare_fragments(
     if config.signature_radii is not None and not 1 <= config.signature_radii <= len(config.radii):
         raise ReassembleError(f"signature_radii must be 1 to {len(config.radii)} (the descriptor radii), "
                               f"got {config.signature_radii}")
+    n_signature = config.signature_radii or len(config.radii)  # one width for every fragment's signatures
     names = sorted(meshes)
     pairs = [meshes[n] for n in names]
     size = reference_size(pairs)
@@ -388,12 +389,11 @@ def prepare_fragments(
         if s is None:
             s = Segmentation(np.zeros(len(f), bool), np.zeros(len(f)), np.zeros(len(f), int),
                              np.full(len(f), -1), 0.0, float(face_areas(v, f).sum()))
-            surf = empty_surface(v, f, n_radii=config.signature_radii or len(radii), n_samples=config.samples,
-                                 rng=rng)
+            surf = empty_surface(v, f, n_radii=n_signature, n_samples=config.samples, rng=rng)
             log.warning("%s: %s", name, notes[name])
         else:
             surf = fracture_surface(v, f, s, d, spacing=spacing, n_samples=config.samples,
-                                    signature_radii=config.signature_radii, rng=rng)
+                                    signature_radii=n_signature, rng=rng)
             if shell and len(surf.keypoints):
                 n, t = strip_frames(v, f, thickness[k], surf.keypoints, surf.keypoint_normals)
                 surf = dataclasses.replace(surf, keypoint_normals=n, keypoint_tangents=t)

@@ -74,3 +74,46 @@ def match_config(signature_radii: int | None):
     from reassemble.pipeline import MatchConfig
 
     return MatchConfig() if signature_radii is None else MatchConfig(signature_radii=signature_radii)
+
+
+def described(gt_path, config, *, cache: bool = True):
+    """The puzzle's :class:`pipeline.DescribedSet` under ``config``, cached beside the set.
+
+    The cache (``<set>/_cache/<puzzle>-<key>.pkl``) is keyed by the fragments, the options
+    the descriptors depend on and the source of the code computing them, so a change to
+    any of them recomputes. Segmentation and matching studies then start in seconds.
+    """
+    import hashlib
+    import inspect
+    import pickle
+    from pathlib import Path
+
+    from reassemble import pipeline
+    from reassemble.pipeline import describe_fragments, read_puzzle
+
+    gt_path = Path(gt_path)
+    puzzle = read_puzzle(gt_path, with_labels=False)
+    meshes = {n: (m.vertices, m.faces) for n, m in sorted(puzzle.meshes.items())}
+    if not cache:
+        return describe_fragments(meshes, config=config)
+    code = Path(__file__).resolve().parents[1] / "reassemble"
+    key = hashlib.sha256()
+    for path in sorted(code.glob("descriptors/*.py")) + [code / "geometry.py"]:
+        key.update(path.read_bytes())
+    for fn in (describe_fragments, pipeline._describe, pipeline._smoothed_copies):
+        key.update(inspect.getsource(fn).encode())
+    key.update(repr((config.radii, config.denoise, config.max_memory)).encode())
+    for v, f in meshes.values():
+        key.update(v.tobytes())
+        key.update(f.tobytes())
+    path = gt_path.parent.parent / "_cache" / f"{gt_path.parent.name}-{key.hexdigest()[:16]}.pkl"
+    if path.is_file():
+        with open(path, "rb") as fh:
+            return pickle.load(fh)
+    out = describe_fragments(meshes, config=config)
+    path.parent.mkdir(exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "wb") as fh:
+        pickle.dump(out, fh, protocol=pickle.HIGHEST_PROTOCOL)
+    tmp.replace(path)
+    return out

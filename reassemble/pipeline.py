@@ -312,33 +312,50 @@ def _map(fn, tasks, *, jobs: int, initializer=None, initargs=()):
         yield from pool.map(fn, tasks, chunksize=max(1, len(tasks) // (8 * jobs)))
 
 
-def prepare_fragments(
+@dataclasses.dataclass
+class DescribedSet:
+    """A fragment set after its descriptors: what segmentation and features start from
+    (:func:`describe_fragments`). Lists are in ``names`` order.
+
+    Attributes
+    ----------
+    names : sorted fragment names
+    meshes : (vertices (n, 3), faces (f, 3)) as given
+    matched : (n, 3) vertices the matching uses: the given ones, or Taubin-smoothed copies
+    noise : vertex noise sigma per fragment, mesh units (:func:`geometry.vertex_noise`)
+    smoothing : Taubin iterations of the copies (0: the given vertices)
+    size : reference size (:func:`reference_size`)
+    descriptors : Descriptors at the face centres, None where a fragment could not be described
+    notes : name -> why it was not described
+    """
+
+    names: list[str]
+    meshes: list[tuple[np.ndarray, np.ndarray]]
+    matched: list[np.ndarray]
+    noise: list[float]
+    smoothing: int
+    size: float
+    descriptors: list
+    notes: dict[str, str]
+
+
+def describe_fragments(
     meshes: dict[str, tuple[np.ndarray, np.ndarray]],
     *,
     config: MatchConfig = MatchConfig(),
-    segment_params=None,
-    seed: int = 0,
     jobs: int = 1,
     progress: bool = False,
-) -> tuple[list[PreparedFragment], float]:
-    """Descriptors at the face centres, segmentation over the whole set, fracture features.
+) -> DescribedSet:
+    """Vertex noise, the copies to match on and the descriptors at their face centres.
 
     ``jobs`` > 1 computes the descriptors of that many fragments at once, in processes.
-    Returns the prepared fragments (in sorted name order) and the reference size.
+    Raises ReassembleError when no fragment can be described.
     """
     from tqdm import tqdm
 
     from .descriptors import DescriptorParams
-    from .features import empty_surface, fracture_surface
-    from .segmentation import SegmentParams, Segmentation, segment
-
     from .geometry import vertex_noise
-    from .shells import is_thin_shell, strip_frames, strip_segmentation, wall_thickness
 
-    if config.signature_radii is not None and not 1 <= config.signature_radii <= len(config.radii):
-        raise ReassembleError(f"signature_radii must be 1 to {len(config.radii)} (the descriptor radii), "
-                              f"got {config.signature_radii}")
-    n_signature = config.signature_radii or len(config.radii)  # one width for every fragment's signatures
     names = sorted(meshes)
     pairs = [meshes[n] for n in names]
     size = reference_size(pairs)
@@ -362,10 +379,42 @@ def prepare_fragments(
         descriptors.append(d)
         if note:
             notes[name] = note
-    good = [k for k, d in enumerate(descriptors) if d is not None]
-    if not good:  # nothing to match: say why rather than report every fragment unplaced
+    if all(d is None for d in descriptors):  # nothing to match: say why rather than report every fragment unplaced
         raise ReassembleError(f"none of the {len(names)} fragments could be matched; "
                               f"{names[0]}: {notes[names[0]].removeprefix('not matched: ')}")
+    return DescribedSet(names, pairs, matched, noise, smoothing, size, descriptors, notes)
+
+
+def prepare_fragments(
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]],
+    *,
+    config: MatchConfig = MatchConfig(),
+    segment_params=None,
+    seed: int = 0,
+    jobs: int = 1,
+    progress: bool = False,
+    described: DescribedSet | None = None,
+) -> tuple[list[PreparedFragment], float]:
+    """Descriptors at the face centres, segmentation over the whole set, fracture features.
+
+    ``jobs`` > 1 computes the descriptors of that many fragments at once, in processes.
+    ``described``: the set's :func:`describe_fragments` with this ``config``, when already
+    computed (``meshes`` is then ignored).
+    Returns the prepared fragments (in sorted name order) and the reference size.
+    """
+    from .features import empty_surface, fracture_surface
+    from .segmentation import SegmentParams, Segmentation, segment
+    from .shells import is_thin_shell, strip_frames, strip_segmentation, wall_thickness
+
+    if config.signature_radii is not None and not 1 <= config.signature_radii <= len(config.radii):
+        raise ReassembleError(f"signature_radii must be 1 to {len(config.radii)} (the descriptor radii), "
+                              f"got {config.signature_radii}")
+    n_signature = config.signature_radii or len(config.radii)  # one width for every fragment's signatures
+    if described is None:
+        described = describe_fragments(meshes, config=config, jobs=jobs, progress=progress)
+    names, pairs, matched, size = described.names, described.meshes, described.matched, described.size
+    descriptors, notes, smoothing = described.descriptors, dict(described.notes), described.smoothing
+    good = [k for k, d in enumerate(descriptors) if d is not None]
     segs = [None] * len(names)
     thickness = {k: wall_thickness(matched[k], pairs[k][1]) for k in good}
     shell = config.thin_walls
@@ -385,7 +434,7 @@ def prepare_fragments(
     rngs = np.random.default_rng(seed).spawn(len(names))
     out = []
     for k, (name, (given, f), v, d, s, rng, sigma) in enumerate(zip(names, pairs, matched, descriptors, segs, rngs,
-                                                                  noise)):
+                                                                  described.noise)):
         if s is None:
             s = Segmentation(np.zeros(len(f), bool), np.zeros(len(f)), np.zeros(len(f), int),
                              np.full(len(f), -1), 0.0, float(face_areas(v, f).sum()))

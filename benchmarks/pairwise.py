@@ -14,6 +14,10 @@ Per puzzle:
 - the same pairs with Open3D's FPFH + RANSAC + ICP (tutorial settings, voxel 1/40 of the
   reference size; its ICP fitness as the score), unless --no-baseline;
 - time: preparation (descriptors, segmentation, features) per fragment, and per pair.
+
+With --cached the descriptors come from the cache beside the set (``benchmarks.common.described``,
+computed on first use): the figures are the same, and a study of segmentation or matching
+skips the slowest part.
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import add_selection, add_signature_radii, header, match_config, select  # noqa: E402
+from benchmarks.common import add_selection, add_signature_radii, described, header, match_config, select  # noqa: E402
 
 MIN_CONTACT = 0.05
 
@@ -41,7 +45,8 @@ def errors(T: np.ndarray, T_true: np.ndarray, centre: np.ndarray, diag: float) -
     return rot, t
 
 
-def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | None = None) -> dict:
+def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | None = None,
+               cache: bool = False) -> dict:
     from sklearn.metrics import f1_score
 
     from reassemble.geometry import face_areas, invert_transform
@@ -49,9 +54,9 @@ def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | N
 
     puzzle = read_puzzle(gt_path)
     gt = puzzle.ground_truth
+    config = match_config(signature_radii)
     t = time.perf_counter()
-    frags, size = prepare_fragments({n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}, seed=seed,
-                                    config=match_config(signature_radii))
+    frags, size = prepare_fragments({}, described=described(gt_path, config, cache=cache), seed=seed, config=config)
     t_prepare = time.perf_counter() - t
     labels = np.concatenate([puzzle.labels[f.name] for f in frags])
     pred = np.concatenate([f.segmentation.fracture for f in frags])
@@ -115,6 +120,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_selection(parser, pieces="2,4,8")
     parser.add_argument("--no-baseline", action="store_true")
+    parser.add_argument("--cached", action="store_true",
+                        help="descriptors from the cache beside the set (benchmarks/segmentation.py fills it): "
+                        "same results, the preparation time then leaves the descriptors out")
     add_signature_radii(parser)
     args = parser.parse_args()
     header()
@@ -128,7 +136,8 @@ def main() -> int:
     with ProcessPoolExecutor(args.jobs) as pool:
         results = []
         for spec, r in zip(specs, pool.map(run_puzzle, paths, [not args.no_baseline] * len(paths),
-                                           [args.seed] * len(paths), [args.signature_radii] * len(paths))):
+                                           [args.seed] * len(paths), [args.signature_radii] * len(paths),
+                                           [args.cached] * len(paths))):
             results.append(r)
             report_puzzle(r)
     groups: dict[str, list] = {"all": [], "clean": [], "noisy": []}

@@ -47,6 +47,22 @@ def test_patches_respect_creases():
     assert face_adjacency(np.asarray(box.faces))[0].shape == (18, 2)
 
 
+def test_small_patches_join_the_flattest_neighbour_below_the_merge_angle():
+    # faces 0-1 a big patch, 2-3 another; face 4 a shard touching both (at 10 and 40 degrees),
+    # face 5 a shard touching only patch 2-3, across a real crease (80 degrees)
+    patch = np.array([0, 0, 1, 1, 2, 3])
+    area = np.array([1.0, 1.0, 1.0, 1.0, 0.1, 0.1])
+    pairs = np.array([[0, 1], [2, 3], [4, 0], [4, 2], [5, 3]])
+    dihedral = np.array([5.0, 5.0, 10.0, 40.0, 80.0])
+    merged = seg.merge_small_patches(patch, pairs, dihedral, area, min_area=0.5, max_angle=45.0)
+    assert merged[4] == merged[0] != merged[2]
+    assert merged[5] not in merged[:5]
+    assert np.array_equal(np.unique(merged), np.arange(3))
+    # with no small patch, nothing changes
+    assert np.array_equal(seg.merge_small_patches(patch[:4], pairs[:2], dihedral[:2], area[:4], min_area=0.5,
+                                                  max_angle=45.0), patch[:4])
+
+
 def test_kabsch_recovers_transform(rng):
     T = make_transform(random_rotation(rng), rng.normal(size=3))
     a = rng.normal(size=(5, 6, 3))
@@ -185,11 +201,14 @@ def _mixture(means, sds, weights):
     return gmm
 
 
-@pytest.mark.parametrize("case", ["noisy original in two", "fracture in two"])
+@pytest.mark.parametrize("case", ["noisy original in two", "fracture in two", "broad fracture, narrow original"])
 def test_middle_mixture_component_joins_the_break_only_when_it_overlaps_it(case, rng):
     # the components fitted on the noisy and the clean angle block in 4 pieces (2026-12-01 set)
     if case == "noisy original in two":  # means 1.11 apart, sds 0.18 / 0.31: two kinds
         means, sds, weights, fracture = [-1.63, -0.32, 0.79], [0.32, 0.31, 0.18], [0.05, 0.35, 0.6], [2]
+    elif case == "broad fracture, narrow original":  # the noisy cow in 2 pieces, 2026-12-02 set:
+        # 1.03 apart, within 1.5 of the broad sd (0.79) but not of the narrow one (0.16); joined: F1 0.41
+        means, sds, weights, fracture = [0.77, -0.26, -0.93], [0.79, 0.16, 0.27], [0.47, 0.21, 0.32], [0]
     else:  # 0.05 apart: one kind split in two
         means, sds, weights, fracture = [-0.94, 0.66, 0.71], [0.42, 0.27, 0.11], [0.11, 0.35, 0.54], [1, 2]
     gmm = _mixture(means, sds, weights)

@@ -53,6 +53,8 @@ class RegistrationParams:
     gap : mating surfaces are this far apart (material lost at the break: worn or chipped
         edges, a scan that missed a layer); contact is counted at this distance, within
         ``tolerance``, and ICP keeps it (:func:`set_gap` measures it from the data)
+    plane_consensus : a RANSAC inlier must also lie within ``tolerance`` of the target
+        keypoint's tangent plane, not only within ``ransac_tolerance`` of it (:func:`ransac`)
     """
 
     tolerance: float = 0.006
@@ -69,6 +71,7 @@ class RegistrationParams:
     noise_tolerance: float = 2.5
     consensus_pool: int = 300
     gap: float = 0.0
+    plane_consensus: bool = True
 
 
 def with_noise(params: RegistrationParams, *, noise: float, size: float) -> RegistrationParams:
@@ -153,6 +156,7 @@ def ransac(
     radius: float,
     params: RegistrationParams,
     rng: np.random.Generator,
+    plane_tol: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Hypotheses from pairs of correspondences: (h, 4, 4) transforms and (h,) inlier counts, best first.
 
@@ -160,6 +164,12 @@ def ransac(
     whose target keypoints both lie within ``radius`` of each other (a k-d tree on the
     6-d concatenation, Chebyshev metric). A small contact holds only a handful of true
     correspondences among thousands; random draws of two would almost never hit two of them.
+
+    A probe keypoint is an inlier within ``tol`` of a target keypoint with an opposed normal
+    and, with ``plane_tol`` (the contact tolerance), within that of the target keypoint's
+    tangent plane: two rough breaks held face to face in a wrong pose still have most
+    keypoints within ``tol`` of each other (the keypoint spacing sets ``tol``), but only
+    mates lie on each other's surface.
     """
     from scipy.spatial import cKDTree
 
@@ -197,19 +207,20 @@ def ransac(
     anchors = pairs[pick[idx[facing], 0], 0]
     hoods = _neighbourhoods(source.keypoints, anchors, 2.0 * radius)
     return _consensus(T, anchors, source, target, cKDTree(target.keypoints), hoods, tol=tol, cos_tol=cos_tol,
-                      params=params, first=64, rng=rng)
+                      params=params, first=64, rng=rng, plane_tol=plane_tol)
 
 
-def _consensus(T, anchors, source, target, tree, hoods, *, tol, cos_tol, params, first: int, rng):
-    """Hypotheses ranked by probe inliers around their anchors: ``first`` probes for all,
-    256 for the best ``params.consensus_pool``; (h, 4, 4) and (h,), best first."""
+def _consensus(T, anchors, source, target, tree, hoods, *, tol, cos_tol, params, first: int, rng, plane_tol=None):
+    """Hypotheses ranked by probe inliers around their anchors (:func:`_inliers`): ``first``
+    probes for all, 256 for the best ``params.consensus_pool``; (h, 4, 4) and (h,), best first."""
     probes = _draw(hoods, anchors, first, rng)
     # in chunks, so memory stays bounded (two sherds give up to params.hypotheses at once)
     inliers = np.concatenate([_inliers(T[k:k + 20000], source, target, tree, probes[k:k + 20000], tol=tol,
-                                       cos_tol=cos_tol) for k in range(0, len(T), 20000)])
+                                       cos_tol=cos_tol, plane_tol=plane_tol) for k in range(0, len(T), 20000)])
     top = np.argsort(-inliers, kind="stable")[: params.consensus_pool]
     T, anchors = T[top], anchors[top]
-    inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, 256, rng), tol=tol, cos_tol=cos_tol)
+    inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, 256, rng), tol=tol, cos_tol=cos_tol,
+                       plane_tol=plane_tol)
     best = np.argsort(-inliers, kind="stable")
     return T[best], inliers[best]
 
@@ -305,14 +316,18 @@ def _draw(hoods: dict[int, np.ndarray], anchors: np.ndarray, m: int, rng: np.ran
     return flat[start[row, None] + (u * sizes[row, None]).astype(np.int64)]
 
 
-def _inliers(T, source, target, tree, probes, *, tol: float, cos_tol: float) -> np.ndarray:
+def _inliers(T, source, target, tree, probes, *, tol: float, cos_tol: float, plane_tol: float | None = None) -> np.ndarray:
     """(h,) how many of each hypothesis' probe keypoints (h, m) land within ``tol`` of a
-    target keypoint with opposed normals (and, on thin walls, parallel break tangents)."""
+    target keypoint with opposed normals (and, on thin walls, parallel break tangents) and,
+    with ``plane_tol``, within that of its tangent plane."""
     p, n = source.keypoints[probes], source.keypoint_normals[probes]
     moved = np.einsum("hij,hkj->hki", T[:, :3, :3], p) + T[:, None, :3, 3]
     turned = np.einsum("hij,hkj->hki", T[:, :3, :3], n)
     dist, near = tree.query(moved.reshape(-1, 3), distance_upper_bound=tol)
     hit = np.isfinite(dist)
+    if plane_tol is not None:
+        off = moved.reshape(-1, 3)[hit] - target.keypoints[near[hit]]
+        hit[hit] = np.abs(np.einsum("ij,ij->i", off, target.keypoint_normals[near[hit]])) < plane_tol
     opposed = np.zeros_like(hit)
     opposed[hit] = np.einsum("ij,ij->i", turned.reshape(-1, 3)[hit], target.keypoint_normals[near[hit]]) < -cos_tol
     if source.keypoint_tangents is not None and target.keypoint_tangents is not None:
@@ -575,7 +590,7 @@ def register_pair(
                                       rng=rng)
     else:
         T, inliers = ransac(source, target, pairs, tol=rtol, radius=params.pair_radius * size, params=params,
-                            rng=rng)
+                            rng=rng, plane_tol=tol if params.plane_consensus else None)
     candidates = []
     # a shortlist gets a quick coarse ICP on a thousand samples and a quick contact count;
     # the best of those the full ICP and score (the true pose of a small contact ranked

@@ -46,11 +46,13 @@ class SegmentParams:
     crease_angle : dihedral angle (degrees) above which an edge bounds a patch
     patch_size : edge of the cell grid that caps patch size (fraction of the reference size)
     smoothness : weight of the graph cut's boundary term against the patch evidence
-    smooth_angle : dihedral angle (degrees) at which cutting a boundary costs e^-1 of a flat one;
-        the crease angle: under noise, smooth surface has edges of 10-20 degrees, and at 10
-        cutting them was nearly free (``benchmarks/segmentation.py``, F1 clean / noisy at
-        10, 15, 20, 30, 40: 0.976 / 0.943, 0.981 / 0.954, 0.983 / 0.962, 0.984 / 0.961,
-        0.982 / 0.961)
+    smooth_angle : dihedral angle (degrees) at which cutting a boundary costs e^-1 of a flat one.
+        Under noise smooth surface has edges of 10-20 degrees, and at 10 cutting them was
+        nearly free (``benchmarks/segmentation.py``, F1 clean / noisy at 10, 15, 20, 30, 40:
+        0.976 / 0.943, 0.981 / 0.954, 0.983 / 0.962, 0.984 / 0.961, 0.982 / 0.961); from 20 up
+        a break met at a shallow angle costs too much to cut out, and the cut erased one
+        fragment's break on the low-resolution torus in 5 pieces (tests/test_assembly.py,
+        test_missing_fragment_others_still_right)
     samples : surface samples per fragment for the quadric fits
     min_samples : patches with fewer samples (expected) are too small for a quadric fit:
         they join a neighbour (``merge_angle``), or carry no evidence
@@ -67,7 +69,7 @@ class SegmentParams:
     crease_angle: float = 30.0
     patch_size: float = 0.1
     smoothness: float = 1.0
-    smooth_angle: float = 30.0
+    smooth_angle: float = 15.0
     samples: int = 30000
     min_samples: int = 12
     min_fracture_share: float = 0.1

@@ -36,23 +36,23 @@ def run_puzzle(gt_path: str, seed: int) -> dict:
     frags, _ = prepare_fragments({}, described=ds, seed=seed)
     t_segment = time.perf_counter() - t
     labels = read_puzzle(gt_path).labels
-    truth = np.concatenate([labels[f.name] for f in frags]).astype(bool)
-    pred = np.concatenate([f.segmentation.fracture for f in frags])
-    area = np.concatenate([face_areas(f.vertices, f.faces) for f in frags])
-    tp = float(area[truth & pred].sum())
-    precision = tp / max(float(area[pred].sum()), 1e-300)
-    recall = tp / max(float(area[truth].sum()), 1e-300)
-    f1 = 2 * precision * recall / max(precision + recall, 1e-300)
-    worst = min((_f1(labels[f.name].astype(bool), f.segmentation.fracture, face_areas(f.vertices, f.faces)), f.name)
-                for f in frags)
+    truth = [labels[f.name].astype(bool) for f in frags]
+    pred = [f.segmentation.fracture for f in frags]
+    area = [face_areas(f.vertices, f.faces) for f in frags]
+    precision, recall, f1 = _scores(np.concatenate(truth), np.concatenate(pred), np.concatenate(area))
+    worst = min((_scores(t, p, a)[2], f.name) for t, p, a, f in zip(truth, pred, area, frags))
+    all_area = np.concatenate(area)
     return {"name": Path(gt_path).parent.name, "fragments": len(frags), "f1": f1, "precision": precision,
-            "recall": recall, "true_share": float(area[truth].sum() / area.sum()),
+            "recall": recall, "true_share": float(all_area[np.concatenate(truth)].sum() / all_area.sum()),
             "smoothing": ds.smoothing, "worst": worst, "t_describe": t_describe, "t_segment": t_segment}
 
 
-def _f1(truth: np.ndarray, pred: np.ndarray, area: np.ndarray) -> float:
+def _scores(truth: np.ndarray, pred: np.ndarray, area: np.ndarray) -> tuple[float, float, float]:
+    """Area-weighted precision, recall and F1 of the fracture label."""
     tp = float(area[truth & pred].sum())
-    return 2 * tp / max(float(area[truth].sum() + area[pred].sum()), 1e-300)
+    precision = tp / max(float(area[pred].sum()), 1e-300)
+    recall = tp / max(float(area[truth].sum()), 1e-300)
+    return precision, recall, 2 * precision * recall / max(precision + recall, 1e-300)
 
 
 def main() -> int:

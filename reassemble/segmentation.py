@@ -160,9 +160,6 @@ def merge_small_patches(
     -------
     (f,) patch per face, numbered 0, 1, ...
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components as components
-
     for _ in range(rounds):
         n = int(patch.max()) + 1
         small = np.bincount(patch, area, n) < min_area
@@ -182,8 +179,7 @@ def merge_small_patches(
         first = first[mean[first] < max_angle]
         if len(first) == 0:
             break
-        graph = coo_matrix((np.ones(len(first)), (ka[first], kb[first])), shape=(n, n))
-        patch = components(graph, directed=False)[1][patch]
+        patch = connected_components(n, np.column_stack([ka[first], kb[first]]))[1][patch]
     return np.unique(patch, return_inverse=True)[1].ravel()
 
 

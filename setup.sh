@@ -22,10 +22,11 @@ if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv"
   "$PYTHON" -m venv .venv
 fi
-echo "setup: installing reassemble and its dependencies into .venv (log: .venv/setup.log)"
+# requirements.lock pins the versions the tests ran with (pyproject.toml keeps ranges for library users)
+echo "setup: installing reassemble and its dependencies (tested versions: requirements.lock) into .venv (log: .venv/setup.log)"
 # build-backend chatter goes to the log; it is shown only if the install fails
 if ! { .venv/bin/python -m pip install --disable-pip-version-check --upgrade pip &&
-       .venv/bin/python -m pip install --disable-pip-version-check -e ".[test]"; } > .venv/setup.log 2>&1; then
+       .venv/bin/python -m pip install --disable-pip-version-check -c requirements.lock -e ".[test]"; } > .venv/setup.log 2>&1; then
   tail -n 30 .venv/setup.log >&2
   echo "setup: pip install failed (full log: .venv/setup.log)" >&2
   exit 1

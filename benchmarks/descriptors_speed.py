@@ -25,7 +25,7 @@ from benchmarks.common import header  # noqa: E402
 CHILD = r"""
 import json, resource, sys, time
 import numpy as np, trimesh
-from reassemble.io import load_mesh
+from reassemble.files import load_mesh
 from reassemble.descriptors import DescriptorParams, integral_invariants
 levels, d2, res = int(sys.argv[1]), sys.argv[2] == "1", float(sys.argv[3])
 m = load_mesh(sys.argv[4])

@@ -41,7 +41,7 @@ def main() -> int:
     args = parser.parse_args()
     header()
     from reassemble.errors import ReassembleError
-    from reassemble.io import load_mesh
+    from reassemble.files import load_mesh
     from reassemble.pipeline import MatchConfig, break_to_folder, evaluate_files, run_to_folder
     from reassemble.synth import BreakParams
 

@@ -23,7 +23,7 @@ from data_synth.make_sets import build_set  # noqa: E402
 from data_synth.sets import SETS  # noqa: E402
 from data_synth.verify import check_puzzle  # noqa: E402
 from reassemble.errors import ReassembleError  # noqa: E402
-from reassemble.io import load_mesh, read_json, resolve_mesh_path  # noqa: E402
+from reassemble.files import load_mesh, read_json, resolve_mesh_path  # noqa: E402
 from reassemble.pipeline import break_to_folder, evaluate_files, read_puzzle  # noqa: E402
 from reassemble.synth import BreakParams  # noqa: E402
 

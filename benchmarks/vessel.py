@@ -51,7 +51,7 @@ def main() -> int:
     args = parser.parse_args()
     header()
     from reassemble.geometry import face_areas, invert_transform, make_transform, random_rotation, transform_points
-    from reassemble.io import load_mesh, read_json, write_ply
+    from reassemble.files import load_mesh, read_json, write_ply
     from reassemble.metrics import ScoringFragment, evaluate
     from reassemble.pipeline import MatchConfig, run_to_folder
 

@@ -18,7 +18,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from reassemble.errors import ReassembleError
-from reassemble.io import write_json
+from reassemble.files import write_json
 from reassemble.pipeline import break_to_folder
 from reassemble.synth import BreakParams
 

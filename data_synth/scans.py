@@ -14,7 +14,7 @@ def punch_holes(puzzle_dir: str | Path, out: str | Path, *, radius: float, seed:
     seeded random face centre on the fragment's original (not fracture) surface, as a scan
     that missed a patch would.
     """
-    from reassemble.io import write_ply
+    from reassemble.files import write_ply
     from reassemble.pipeline import read_puzzle
 
     puzzle = read_puzzle(Path(puzzle_dir) / "ground_truth.json")

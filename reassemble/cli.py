@@ -150,7 +150,7 @@ def _format_report(report: dict) -> str:
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from .io import write_json
+    from .files import write_json
     from .pipeline import evaluate_files
 
     report = evaluate_files(args.predicted, args.ground_truth, n_points=args.points, seed=args.seed)

@@ -16,7 +16,7 @@ import numpy as np
 from . import __version__
 from .errors import ReassembleError
 from .geometry import canonical_order, face_areas, transform_points
-from .io import (
+from .files import (
     DEBRIS_SHARE,
     TRANSFORMS_CONVENTION,
     check_output_folder,
@@ -43,7 +43,7 @@ def describe_to_file(
     fill_holes: float | None = None,
 ) -> dict:
     """Integral invariants of a closed mesh at its (welded) vertices, written to an ``.npz``;
-    ``fill_holes`` as in :func:`io.load_mesh` (the patches' vertices are described too).
+    ``fill_holes`` as in :func:`files.load_mesh` (the patches' vertices are described too).
 
     Returns a small summary (vertex count, radii in mesh units, timings).
     """
@@ -78,7 +78,7 @@ def break_to_folder(
     mesh: str | Path, out: str | Path, *, params, seed: int, force: bool = False, fill_holes: float | None = None
 ) -> Path:
     """Break ``mesh`` (a path or a bundled mesh name) and write the puzzle to ``out``;
-    ``fill_holes`` as in :func:`io.load_mesh` (an open scan closed before breaking).
+    ``fill_holes`` as in :func:`files.load_mesh` (an open scan closed before breaking).
 
     Writes ``out/fragments/<name>.ply``, ``out/labels.npz`` (per-face int8, 1 = fracture,
     one array per fragment name) and ``out/ground_truth.json``. The folder appears only
@@ -568,10 +568,10 @@ def load_fragments(
     stem; a file holding several separate bodies gives one fragment per body (``stem.1``,
     ``stem.2``, ... largest first; specks under 1 % of the largest's volume are dropped).
     A fragment identical to one already read (same welded vertices and faces) is skipped.
-    With ``fill_holes``, the holes of open scans are closed (see :func:`io.load_mesh`), with
+    With ``fill_holes``, the holes of open scans are closed (see :func:`files.load_mesh`), with
     a warning saying how many and how large.
     """
-    from .io import MESH_SUFFIXES
+    from .files import MESH_SUFFIXES
 
     files: list[Path] = []
     for item in inputs:
@@ -873,7 +873,7 @@ def view_folder(
     Returns a summary: pictures written, the page's path, why pictures were skipped.
     """
     from .geometry import decimate
-    from .io import glb_bytes, read_glb, write_bytes, write_text
+    from .files import glb_bytes, read_glb, write_bytes, write_text
     from .viz.report import report_html
 
     folder = Path(folder)
@@ -955,7 +955,7 @@ def _render_pictures(meshes, T_world, *, placed, colors, analysis, names, r_inde
     """(PNG bytes per picture key, None) or ({}, why no picture can be made)."""
     from tqdm import tqdm
 
-    from .io import png_bytes
+    from .files import png_bytes
     from .viz.pictures import assembly_pictures, fragment_picture, match_picture
     from .viz.render import Renderer, RenderUnavailable, gl_problem
 

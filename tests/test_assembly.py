@@ -10,7 +10,7 @@ from data_synth.sets import smoke_set
 from reassemble.assembly import Assembly, refine, world_poses
 from reassemble.errors import ReassembleError
 from reassemble.geometry import invert_transform, make_transform, random_rotation, rotation_angle_deg
-from reassemble.io import read_transforms
+from reassemble.files import read_transforms
 from reassemble.pipeline import break_to_folder, evaluate_files, prepare_fragments, read_puzzle, run_to_folder
 from reassemble.synth import BreakParams
 
@@ -96,7 +96,7 @@ def test_stray_fragment_is_not_placed(puzzle_dir, tmp_path):
     assert not T["stray"]["placed"]
     assert sum(t["placed"] for t in T.values()) == 4
     # the cow pieces alone, scored against their truth: all four right
-    from reassemble.io import write_json
+    from reassemble.files import write_json
 
     write_json(tmp_path / "cow.json", {"fragments": {n: {"transform": t["transform"].tolist(), "placed": True}
                                                      for n, t in T.items() if n != "stray"}})

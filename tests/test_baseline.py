@@ -10,7 +10,7 @@ from reassemble.baseline import fpfh_assemble, fpfh_register
 from reassemble.geometry import (
     invert_transform, make_transform, random_rotation, rotation_angle_deg, transform_points,
 )
-from reassemble.io import load_mesh, resolve_mesh_path
+from reassemble.files import load_mesh, resolve_mesh_path
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,7 @@ import json
 
 from data_synth.make_sets import build_set
 from data_synth.sets import BENCH_MESHES, bench_set, sherds_set, smoke_set
-from reassemble.io import bundled_meshes, load_mesh
+from reassemble.files import bundled_meshes, load_mesh
 
 
 def test_smoke_set_builds_and_resumes(tmp_path):

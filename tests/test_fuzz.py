@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from reassemble.cli import main
 from reassemble.errors import ReassembleError
-from reassemble.io import load_mesh
+from reassemble.files import load_mesh
 
 SETTINGS = settings(max_examples=150, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])

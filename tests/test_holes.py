@@ -9,7 +9,7 @@ import trimesh
 from data_synth.scans import punch_holes
 from reassemble.errors import ReassembleError
 from reassemble.holes import boundary_loops, fill_holes
-from reassemble.io import load_mesh, write_ply
+from reassemble.files import load_mesh, write_ply
 from reassemble.pipeline import MatchConfig, evaluate_files, read_puzzle, run_to_folder
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from reassemble.geometry import invert_transform, make_transform, random_rotation, rotation_angle_deg
-from reassemble.io import write_ply
+from reassemble.files import write_ply
 from reassemble.pipeline import (break_to_folder, match_pairs, prepare_fragments, read_puzzle, registration_params,
                                  run_to_folder)
 from reassemble.shells import is_thin_shell, wall_thickness

@@ -8,7 +8,7 @@ import pytest
 from data_synth.verify import check_puzzle
 from reassemble.errors import ReassembleError
 from reassemble.geometry import face_areas, signed_volume, transform_points
-from reassemble.io import load_mesh, resolve_mesh_path
+from reassemble.files import load_mesh, resolve_mesh_path
 from reassemble.pipeline import break_to_folder, read_puzzle
 from reassemble.synth import BreakParams, break_mesh, fractal_heightfield
 

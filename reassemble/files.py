@@ -242,14 +242,14 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
 
 def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
     """Write a compressed ``.npz`` atomically (byte-identical for identical arrays)."""
-    import io as _io
+    import io
     import zipfile
 
-    buf = _io.BytesIO()
+    buf = io.BytesIO()
     # np.savez stamps the current time into the zip; a fixed date keeps output reproducible.
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name, arr in arrays.items():
-            b = _io.BytesIO()
+            b = io.BytesIO()
             np.save(b, np.ascontiguousarray(arr), allow_pickle=False)
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
             info.compress_type = zipfile.ZIP_DEFLATED
@@ -445,11 +445,11 @@ def write_text(path: str | os.PathLike, text: str) -> None:
 
 def png_bytes(image: np.ndarray) -> bytes:
     """PNG encoding of an (h, w, 3) uint8 image (no timestamp: the same image, the same bytes)."""
-    import io as _io
+    import io
 
     from PIL import Image
 
-    buf = _io.BytesIO()
+    buf = io.BytesIO()
     Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8)).save(buf, format="PNG", optimize=True)
     return buf.getvalue()
 

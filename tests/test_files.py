@@ -5,7 +5,7 @@ import pytest
 
 from reassemble.errors import ReassembleError
 from reassemble.geometry import signed_volume
-from reassemble.io import bundled_meshes, load_mesh, read_transforms, staged_directory, write_json
+from reassemble.files import bundled_meshes, load_mesh, read_transforms, staged_directory, write_json
 
 
 @pytest.mark.parametrize("name", sorted(bundled_meshes()))

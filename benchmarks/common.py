@@ -88,7 +88,7 @@ def described(gt_path, config, *, cache: bool = True):
     import pickle
     from pathlib import Path
 
-    from reassemble import pipeline
+    from reassemble import prepare
     from reassemble.pipeline import describe_fragments, read_puzzle
 
     gt_path = Path(gt_path)
@@ -100,7 +100,7 @@ def described(gt_path, config, *, cache: bool = True):
     key = hashlib.sha256()
     for path in sorted(code.glob("descriptors/*.py")) + [code / "geometry.py"]:
         key.update(path.read_bytes())
-    for fn in (describe_fragments, pipeline._describe, pipeline._smoothed_copies):
+    for fn in (describe_fragments, prepare._describe, prepare._smoothed_copies):
         key.update(inspect.getsource(fn).encode())
     key.update(repr((config.radii, config.denoise, config.max_memory)).encode())
     for v, f in meshes.values():

@@ -214,7 +214,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _view(folder: Path, *, progress: bool, **options) -> None:
-    from .pipeline import view_folder
+    from .view import view_folder
 
     summary = view_folder(folder, progress=progress, **options)
     if summary["pictures"]:
@@ -229,7 +229,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from .pipeline import demo_to_folder
+    from .demo import demo_to_folder
 
     report, score = demo_to_folder(args.out, mesh=args.mesh, pieces=args.pieces, seed=args.seed, force=args.force,
                                    jobs=_jobs(args), progress=not args.quiet)

@@ -143,7 +143,7 @@ def test_view_writes_pictures_and_a_self_contained_report(gl, run_dir, puzzle_di
 
 def test_view_without_gl_still_writes_the_report(run_dir, tmp_path, monkeypatch, caplog):
     import reassemble.viz.render as render
-    from reassemble.pipeline import view_folder
+    from reassemble.view import view_folder
 
     folder = tmp_path / "run"
     shutil.copytree(run_dir, folder)

@@ -1,0 +1,107 @@
+"""The match-pairs stage: every pair of fragments registered, in a process pool.
+
+:func:`registration_params` resolves the registration options from the data (the contact
+tolerance from the vertex noise, more hypotheses for thin-walled sherds); :func:`match_set`
+registers every pair and measures how far apart mating surfaces are.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+from tqdm import tqdm
+
+from .geometry import make_scene
+from .parallel import pool_map, worker_state
+from .prepare import PreparedFragment, set_noise, thin_walled
+from .registration import RegistrationParams, register_pair, set_gap, with_noise
+
+log = logging.getLogger(__name__)
+
+
+def registration_params(fragments: list[PreparedFragment], *, size: float, params=None):
+    """The registration options for this set, resolved from the data: ``params`` (default
+    ``RegistrationParams()``) with the contact tolerance raised to cover its vertex noise."""
+    params = with_noise(params or RegistrationParams(), noise=set_noise(fragments), size=size)
+    if thin_walled(fragments):
+        # one-point hypotheses on strips are many and their local consensus weak (a break
+        # curve matches any curve over a short stretch): more of them go on to ICP
+        params = dataclasses.replace(params, shortlist=100, consensus_pool=2000)
+    return params
+
+
+def _pair_worker_init(surfaces, meshes, size, params) -> None:
+    worker_state.clear()
+    worker_state.update(surfaces=surfaces, meshes=meshes, size=size, params=params, scenes={})
+
+
+def _pair_worker(task):
+    i, j, rng = task
+    w = worker_state
+    scenes = w["scenes"]
+    for k in (i, j):
+        if k not in scenes:
+            scenes[k] = make_scene(*w["meshes"][k])
+    return (i, j), register_pair(w["surfaces"][i], w["surfaces"][j], source_scene=scenes[i], target_scene=scenes[j],
+                                 size=w["size"], params=w["params"], rng=rng)
+
+
+def match_pairs(
+    fragments: list[PreparedFragment],
+    *,
+    size: float,
+    pairs: list[tuple[int, int]] | None = None,
+    params=None,
+    seed: int = 0,
+    jobs: int = 1,
+    progress: bool = False,
+) -> dict[tuple[int, int], object]:
+    """Register fragment pairs (all, or the given (source, target) index pairs): PairResult per pair.
+
+    ``jobs`` > 1 registers pairs in that many processes; every pair has its own random
+    stream (spawned from ``seed`` in pair order), so results do not depend on ``jobs``.
+    ``params``: default :func:`registration_params` of the fragments (noise-aware tolerance).
+    """
+    params = params or registration_params(fragments, size=size)
+    if pairs is None:
+        pairs = [(i, j) for i in range(len(fragments)) for j in range(i + 1, len(fragments))]
+    rngs = np.random.default_rng(seed).spawn(len(pairs))
+    tasks = [(i, j, rng) for (i, j), rng in zip(pairs, rngs)]
+    init = ([f.surface for f in fragments], [f.mesh for f in fragments], size, params)
+    results = {}
+    for key, res in tqdm(pool_map(_pair_worker, tasks, jobs=jobs, initializer=_pair_worker_init, initargs=init),
+                         total=len(tasks), desc="pairs", disable=not progress):
+        results[key] = res
+    return results
+
+
+def match_set(
+    fragments: list[PreparedFragment], *, size: float, params, gap: float | None = None, seed: int = 0,
+    jobs: int = 1, progress: bool = False,
+):
+    """Register every pair, with the separation of mating surfaces measured or given.
+
+    With ``gap`` None, the pairs are registered touching, the separation of the touching
+    ones measured (:func:`registration.set_gap`), and when it exceeds the contact
+    tolerance (plain contacts would close it, shifting every piece by it and counting
+    rough surfaces as interpenetrating), every pair is registered again that far apart.
+
+    Returns
+    -------
+    results : (source, target) -> PairResult
+    params : the RegistrationParams used, ``gap`` resolved (fraction of ``size``)
+    """
+    if gap is not None:
+        params = dataclasses.replace(params, gap=float(gap))
+    results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs, progress=progress)
+    if gap is None:
+        measured = set_gap([f.surface for f in fragments], results, size=size, params=params)
+        if measured > params.tolerance:
+            log.info("mating surfaces are %.3g x size apart (material lost at the break?): matching again with "
+                     "that gap", measured)
+            params = dataclasses.replace(params, gap=measured)
+            results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs, progress=progress)
+    return results, params
+

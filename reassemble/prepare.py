@@ -1,0 +1,224 @@
+"""The fragment set through the first stages: describe, segment, features.
+
+:func:`describe_fragments` measures each fragment's vertex noise, picks the vertices to
+match on and computes the integral invariants at the face centres; :func:`prepare_fragments`
+then segments the whole set into fracture and original surface and extracts each fragment's
+fracture features.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+from tqdm import tqdm
+
+from .config import MatchConfig
+from .descriptors import DescriptorParams, integral_invariants
+from .errors import ReassembleError
+from .features import empty_surface, fracture_surface
+from .geometry import denoise, face_areas, taubin_smooth, vertex_noise
+from .parallel import pool_map
+from .segmentation import SegmentParams, Segmentation, segment
+from .shells import is_thin_shell, strip_frames, strip_segmentation, wall_thickness
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass
+class PreparedFragment:
+    """One fragment after descriptors, segmentation and features."""
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    descriptors: object
+    segmentation: object
+    surface: object
+    note: str = ""
+    noise: float = 0.0  # vertex noise sigma of ``vertices``, mesh units (geometry.vertex_noise)
+    smoothing: int = 0  # Taubin iterations of the copy matched (0: ``vertices`` themselves)
+    matched: np.ndarray | None = None  # (n, 3) the smoothed copy's vertices, when smoothing
+    shell: bool = False  # matched as a thin-walled sherd, along its break strip (shells.py)
+
+    @property
+    def mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """(vertices, faces) the matching uses: the smoothed copy, if any (same faces)."""
+        return (self.vertices if self.matched is None else self.matched), self.faces
+
+
+def reference_size(meshes: list[tuple[np.ndarray, np.ndarray]]) -> float:
+    """The median bounding-box diagonal of the fragments: the unit of every default length."""
+    return float(np.median([np.linalg.norm(np.ptp(v, axis=0)) for v, _ in meshes]))
+
+
+def _describe(task):
+    """(Descriptors or None, note) of one fragment; a failure is a note, not fatal."""
+    v, f, radii, params, largest = task
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    if diag <= radii.max():
+        return None, (f"not matched: too small (bounding-box diagonal {diag:.4g}, below the largest "
+                      f"descriptor radius {radii.max():.4g} = {largest:g} x the median fragment)")
+    try:
+        return integral_invariants(v, f, radii, points=v[f].mean(axis=1), params=params), ""
+    except ReassembleError as exc:  # e.g. a grid over the memory budget: the others go on
+        return None, f"not matched: {exc}"
+
+
+def _smoothed_copies(meshes, noise, *, threshold: float) -> tuple[list[np.ndarray], int]:
+    """The vertices to match on: the given ones, or, when the set's median vertex noise is
+    over ``threshold``, Taubin-smoothed copies, every fragment with the same number of
+    iterations (mates smoothed differently fit worse), enough to bring the noisiest
+    fragment down to half the threshold (at most 40)."""
+    if float(np.median(noise)) <= threshold:
+        return [v for v, _ in meshes], 0
+    first = [denoise(v, f, target=0.5 * threshold) for v, f in meshes]
+    iterations = max(it for _, it in first)
+    return [taubin_smooth(v, f, iterations - it) if it < iterations else v
+            for (v, it), (_, f) in zip(first, meshes)], iterations
+
+
+
+@dataclasses.dataclass
+class DescribedSet:
+    """A fragment set after its descriptors: what segmentation and features start from
+    (:func:`describe_fragments`). Lists are in ``names`` order.
+
+    Attributes
+    ----------
+    names : sorted fragment names
+    meshes : (vertices (n, 3), faces (f, 3)) as given
+    matched : (n, 3) vertices the matching uses: the given ones, or Taubin-smoothed copies
+    noise : vertex noise sigma per fragment, mesh units (:func:`geometry.vertex_noise`)
+    smoothing : Taubin iterations of the copies (0: the given vertices)
+    size : reference size (:func:`reference_size`)
+    descriptors : Descriptors at the face centres, None where a fragment could not be described
+    notes : name -> why it was not described
+    """
+
+    names: list[str]
+    meshes: list[tuple[np.ndarray, np.ndarray]]
+    matched: list[np.ndarray]
+    noise: list[float]
+    smoothing: int
+    size: float
+    descriptors: list
+    notes: dict[str, str]
+
+
+def describe_fragments(
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]],
+    *,
+    config: MatchConfig = MatchConfig(),
+    jobs: int = 1,
+    progress: bool = False,
+) -> DescribedSet:
+    """Vertex noise, the copies to match on and the descriptors at their face centres.
+
+    ``jobs`` > 1 computes the descriptors of that many fragments at once, in processes.
+    Raises ReassembleError when no fragment can be described.
+    """
+    names = sorted(meshes)
+    pairs = [meshes[n] for n in names]
+    size = reference_size(pairs)
+    radii = size * np.asarray(config.radii)
+    params = DescriptorParams(with_d2=False, principal=True, max_memory=config.max_memory)
+    noise = [vertex_noise(v) for v, _ in pairs]
+    # noise above a fifth of the finest radius swamps the finest scale: the crease angles,
+    # face normals and finest invariants are noise (0.5 % of the diagonal, 4 pieces:
+    # segmentation F1 0.38-0.83, 2 of 6 sets solved; matched on smoothed copies, with the
+    # tolerance still from the noise of the given surfaces: 5 of 6; benchmarks/robustness.py).
+    # A tenth helped 0.2 % noise (strict 0.72 -> 0.96) but smoothed the low-resolution fish
+    # in 20 pieces with 0.1 % noise below its own facets (solved -> 2 of 20 right)
+    matched, smoothing = _smoothed_copies(pairs, noise, threshold=config.denoise * radii[0])
+    if smoothing:
+        log.info("vertex noise %.3g x size, over %g x the finest radius: matching on copies smoothed %d times",
+                 float(np.median(noise)) / size, config.denoise, smoothing)
+    tasks = [(v, f, radii, params, config.radii[-1]) for v, (_, f) in zip(matched, pairs)]
+    descriptors, notes = [], {}
+    for name, (d, note) in zip(names, tqdm(pool_map(_describe, tasks, jobs=jobs), total=len(tasks),
+                                           desc="descriptors", disable=not progress)):
+        descriptors.append(d)
+        if note:
+            notes[name] = note
+    if all(d is None for d in descriptors):  # nothing to match: say why rather than report every fragment unplaced
+        raise ReassembleError(f"none of the {len(names)} fragments could be matched; "
+                              f"{names[0]}: {notes[names[0]].removeprefix('not matched: ')}")
+    return DescribedSet(names, pairs, matched, noise, smoothing, size, descriptors, notes)
+
+
+def prepare_fragments(
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]],
+    *,
+    config: MatchConfig = MatchConfig(),
+    segment_params=None,
+    seed: int = 0,
+    jobs: int = 1,
+    progress: bool = False,
+    described: DescribedSet | None = None,
+) -> tuple[list[PreparedFragment], float]:
+    """Descriptors at the face centres, segmentation over the whole set, fracture features.
+
+    ``jobs`` > 1 computes the descriptors of that many fragments at once, in processes.
+    ``described``: the set's :func:`describe_fragments` with this ``config``, when already
+    computed (``meshes`` is then ignored).
+    Returns the prepared fragments (in sorted name order) and the reference size.
+    """
+    if config.signature_radii is not None and not 1 <= config.signature_radii <= len(config.radii):
+        raise ReassembleError(f"signature_radii must be 1 to {len(config.radii)} (the descriptor radii), "
+                              f"got {config.signature_radii}")
+    n_signature = config.signature_radii or len(config.radii)  # one width for every fragment's signatures
+    if described is None:
+        described = describe_fragments(meshes, config=config, jobs=jobs, progress=progress)
+    names, pairs, matched, size = described.names, described.meshes, described.matched, described.size
+    descriptors, notes, smoothing = described.descriptors, dict(described.notes), described.smoothing
+    good = [k for k, d in enumerate(descriptors) if d is not None]
+    segs = [None] * len(names)
+    thickness = {k: wall_thickness(matched[k], pairs[k][1]) for k in good}
+    shell = config.thin_walls
+    if shell is None:
+        shell = 2 * sum(is_thin_shell(matched[k], pairs[k][1], thickness[k]) for k in good) > len(good)
+    if shell:
+        log.info("thin-walled fragments (sherds): matched along their break strips")
+        for k in good:
+            segs[k] = strip_segmentation(matched[k], pairs[k][1], thickness[k])
+    else:
+        for k, s in zip(good, segment([(matched[k], pairs[k][1]) for k in good], [descriptors[k] for k in good],
+                                      size=size, params=segment_params or SegmentParams(), seed=seed)):
+            segs[k] = s
+    # on sherds one keypoint pair is a hypothesis: the cost grows as the product of the
+    # keypoint counts (at the solids' spacing ~700 per vessel sherd)
+    spacing = config.keypoint_spacing * size * (2.0 if shell else 1.0)
+    rngs = np.random.default_rng(seed).spawn(len(names))
+    out = []
+    for k, (name, (given, f), v, d, s, rng, sigma) in enumerate(zip(names, pairs, matched, descriptors, segs, rngs,
+                                                                  described.noise)):
+        if s is None:
+            s = Segmentation(np.zeros(len(f), bool), np.zeros(len(f)), np.zeros(len(f), int),
+                             np.full(len(f), -1), 0.0, float(face_areas(v, f).sum()))
+            surf = empty_surface(v, f, n_radii=n_signature, n_samples=config.samples, rng=rng)
+            log.warning("%s: %s", name, notes[name])
+        else:
+            surf = fracture_surface(v, f, s, d, spacing=spacing, n_samples=config.samples,
+                                    signature_radii=n_signature, rng=rng)
+            if shell and len(surf.keypoints):
+                n, t = strip_frames(v, f, thickness[k], surf.keypoints, surf.keypoint_normals)
+                surf = dataclasses.replace(surf, keypoint_normals=n, keypoint_tangents=t)
+            if surf.fracture_area == 0.0:
+                notes[name] = "no fracture surface found; it can only be placed by others"
+                log.warning("%s: %s", name, notes[name])
+        out.append(PreparedFragment(name, given, f, d, s, surf, notes.get(name, ""), sigma, smoothing,
+                                    v if smoothing else None, shell))
+    return out, size
+
+
+def set_noise(fragments: list[PreparedFragment]) -> float:
+    """The vertex noise of a fragment set (mesh units): the median of its fragments'."""
+    return float(np.median([f.noise for f in fragments])) if fragments else 0.0
+
+
+def thin_walled(fragments: list[PreparedFragment]) -> bool:
+    """Whether the set was prepared as thin-walled sherds (:func:`prepare_fragments` decides for all)."""
+    return bool(fragments) and all(f.shell for f in fragments)
+

@@ -66,14 +66,14 @@ def select(args) -> list:
 def add_signature_radii(parser) -> None:
     parser.add_argument("--signature-radii", type=int, default=None,
                         help="signatures from this many of the finest descriptor radii "
-                        "(MatchConfig.signature_radii; default MatchConfig's)")
+                        "(Config.features.signature_radii; default Config's)")
 
 
 def match_config(signature_radii: int | None):
-    """MatchConfig with the benchmark's --signature-radii, or the default one."""
-    from reassemble.pipeline import MatchConfig
+    """Config with the benchmark's --signature-radii, or the default one."""
+    from reassemble.config import Config, with_setting
 
-    return MatchConfig() if signature_radii is None else MatchConfig(signature_radii=signature_radii)
+    return Config() if signature_radii is None else with_setting(Config(), f"features.signature_radii={signature_radii}")
 
 
 def described(gt_path, config, *, cache: bool = True):
@@ -102,7 +102,7 @@ def described(gt_path, config, *, cache: bool = True):
         key.update(path.read_bytes())
     for fn in (describe_fragments, prepare._describe, prepare._smoothed_copies):
         key.update(inspect.getsource(fn).encode())
-    key.update(repr((config.radii, config.denoise, config.max_memory)).encode())
+    key.update(repr((config.radii, config.denoise, config.describe)).encode())
     for v, f in meshes.values():
         key.update(v.tobytes())
         key.update(f.tobytes())

@@ -42,14 +42,14 @@ def main() -> int:
     header()
     from reassemble.errors import ReassembleError
     from reassemble.files import load_mesh
-    from reassemble.pipeline import MatchConfig, break_to_folder, evaluate_files, run_to_folder
+    from reassemble.pipeline import Config, break_to_folder, evaluate_files, run_to_folder
     from reassemble.synth import BreakParams
 
     scan = load_mesh(args.mesh, fill_holes=args.fill_holes)
     print(f"{args.mesh.name}: {len(scan.faces)} faces after closing {len(scan.filled_holes)} holes (extent / "
           f"diagonal: {', '.join(f'{s:.3f}' for s in scan.filled_holes)})")
     print(f"{'puzzle':<24s} {'case':<22s} {'strict':>6s} {'BB':>6s} {'solved':>6s} {'time s':>7s}")
-    config = MatchConfig(fill_holes=args.fill_holes)
+    config = Config(fill_holes=args.fill_holes)
     totals: dict[str, list] = {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

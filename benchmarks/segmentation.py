@@ -27,10 +27,10 @@ from benchmarks.common import add_selection, described, header, select  # noqa: 
 
 def run_puzzle(gt_path: str, seed: int) -> dict:
     from reassemble.geometry import face_areas
-    from reassemble.pipeline import MatchConfig, prepare_fragments, read_puzzle
+    from reassemble.pipeline import Config, prepare_fragments, read_puzzle
 
     t = time.perf_counter()
-    ds = described(gt_path, MatchConfig())
+    ds = described(gt_path, Config())
     t_describe = time.perf_counter() - t
     t = time.perf_counter()
     frags, _ = prepare_fragments({}, described=ds, seed=seed)

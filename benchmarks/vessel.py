@@ -53,7 +53,7 @@ def main() -> int:
     from reassemble.geometry import face_areas, invert_transform, make_transform, random_rotation, transform_points
     from reassemble.files import load_mesh, read_json, write_ply
     from reassemble.metrics import ScoringFragment, evaluate
-    from reassemble.pipeline import MatchConfig, run_to_folder
+    from reassemble.pipeline import Config, run_to_folder
 
     rng = np.random.default_rng(args.seed)
     files = sorted(p for p in args.folder.iterdir() if p.suffix.lower() in {".obj", ".ply", ".stl", ".off"})
@@ -78,7 +78,7 @@ def main() -> int:
             truth[name] = invert_transform(T_fragment_given)  # T_world_fragment, world = the given pose
         t = time.perf_counter()
         run_to_folder([moved_dir], Path(tmp) / "out", seed=args.seed, jobs=args.jobs,
-                      config=MatchConfig(gap=args.gap))
+                      config=Config(gap=args.gap))
         elapsed = time.perf_counter() - t
         pred = read_json(Path(tmp) / "out" / "transforms.json", what="transforms")["fragments"]
         report = read_json(Path(tmp) / "out" / "report.json", what="report")

@@ -24,7 +24,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .features import FractureSurface
-from .geometry import farthest_points, invert_transform, make_scene, transform_points
+from .geometry import farthest_points, invert_transform, make_scene, rotation_from_vector, transform_points
 from .registration import RegistrationParams, contact_score, touching_samples
 
 
@@ -41,6 +41,11 @@ class AssemblyParams:
     refine_iterations : joint point-to-plane iterations per sub-assembly
     group_rounds : rounds of registering whole sub-assemblies against each other
     verify_samples : samples per fragment when verifying a merge
+    refine_levels : distance thresholds of the joint refinement, coarse to fine, multiples of
+        the contact tolerance (:func:`refine`); refine_samples : fracture samples per fragment it uses
+    world_gap : space between the main assembly and the other sub-assemblies in the world
+        frame (:func:`world_poses`)
+    touching_points : touching points kept per contact, for the pictures (:func:`contact_points`)
     """
 
     candidates: int = 5
@@ -49,6 +54,10 @@ class AssemblyParams:
     refine_iterations: int = 15
     group_rounds: int = 3
     verify_samples: int = 1000
+    refine_levels: tuple[float, ...] = (2.0, 1.0)
+    refine_samples: int = 1500
+    world_gap: float = 0.1
+    touching_points: int = 40
 
 
 @dataclass(frozen=True)
@@ -251,8 +260,6 @@ def assemble(
     -------
     Assembly
     """
-    from .registration import register_pair
-
     n = len(surfaces)
     tol, gap = reg_params.tolerance * size, reg_params.gap * size
     scenes = [make_scene(v, f) for v, f in meshes]
@@ -273,6 +280,44 @@ def assemble(
     common = dict(surfaces=quick, scenes=scenes, areas=areas, tol=tol, params=params, reg_params=reg_params,
                   centres=centres, radii=radii, cache=cache, gap=gap)
     merges = _merge(proposals, state, **common)
+    merges += _register_groups(proposals, state, surfaces=surfaces, meshes=meshes, size=size, tol=tol, gap=gap,
+                               params=params, reg_params=reg_params, seed=seed, common=common)
+    for g in members.values():
+        if len(g) > 1:
+            poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
+                              iterations=params.refine_iterations, anchor=int(np.argmax(areas[g])),
+                              levels=params.refine_levels, n_points=params.refine_samples, gap=gap)
+
+    # contacts at the final poses, and the groups renumbered by area
+    contacts = []
+    touching = np.zeros(n)
+    for g in members.values():
+        pairs = sorted((min(p, q), max(p, q)) for x, p in enumerate(g) for q in g[x + 1:])
+        for (p, q), (s, c, pen) in sorted(_evaluate(pairs, poses, surfaces, scenes, tol=tol, reg_params=reg_params,
+                                                    centres=centres, radii=radii, cache={}, gap=gap).items()):
+            if c > 0:
+                contacts.append(Contact(p, q, float(s), float(c), float(pen)))
+                touching[p] += c
+                touching[q] += c
+    order = sorted(members, key=lambda r: (-areas[members[r]].sum(), min(members[r])))
+    renumber = {r: k for k, r in enumerate(order)}
+    group = np.array([renumber[r] for r in group])
+    for g in members.values():  # each group's frame: its largest fragment's
+        ref = invert_transform(poses[g[int(np.argmax(areas[g]))]])
+        poses[g] = ref[None] @ poses[g]
+    placed = (group == 0) & (len(members[order[0]]) > 1)
+    fracture = np.array([s.fracture_area for s in surfaces])
+    confidence = np.where(fracture > 0, np.minimum(1.0, touching / np.maximum(fracture, 1e-300)), 0.0)
+    return Assembly(poses, group, placed, confidence, contacts, merges)
+
+
+def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, params, reg_params, seed, common):
+    """Rounds of registering whole sub-assemblies against each other, each followed by a
+    merge (:func:`_merge`) of every proposal so far; returns the merges made."""
+    from .registration import register_pair
+
+    group, poses, members = state
+    merges = []
     tried = set()
     rng = np.random.default_rng(seed)
     for _ in range(params.group_rounds):
@@ -301,33 +346,7 @@ def assemble(
         merges += more
         if not more:
             break
-
-    for g in members.values():
-        if len(g) > 1:
-            poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
-                              iterations=params.refine_iterations, anchor=int(np.argmax(areas[g])), gap=gap)
-
-    # contacts at the final poses, and the groups renumbered by area
-    contacts = []
-    touching = np.zeros(n)
-    for g in members.values():
-        pairs = sorted((min(p, q), max(p, q)) for x, p in enumerate(g) for q in g[x + 1:])
-        for (p, q), (s, c, pen) in sorted(_evaluate(pairs, poses, surfaces, scenes, tol=tol, reg_params=reg_params,
-                                                    centres=centres, radii=radii, cache={}, gap=gap).items()):
-            if c > 0:
-                contacts.append(Contact(p, q, float(s), float(c), float(pen)))
-                touching[p] += c
-                touching[q] += c
-    order = sorted(members, key=lambda r: (-areas[members[r]].sum(), min(members[r])))
-    renumber = {r: k for k, r in enumerate(order)}
-    group = np.array([renumber[r] for r in group])
-    for g in members.values():  # each group's frame: its largest fragment's
-        ref = invert_transform(poses[g[int(np.argmax(areas[g]))]])
-        poses[g] = ref[None] @ poses[g]
-    placed = (group == 0) & (len(members[order[0]]) > 1)
-    fracture = np.array([s.fracture_area for s in surfaces])
-    confidence = np.where(fracture > 0, np.minimum(1.0, touching / np.maximum(fracture, 1e-300)), 0.0)
-    return Assembly(poses, group, placed, confidence, contacts, merges)
+    return merges
 
 
 def _union(meshes: list[tuple[np.ndarray, np.ndarray]], T_group_fragment: np.ndarray):
@@ -373,8 +392,6 @@ def refine(
     -------
     (m, 4, 4) refined poses (a new array)
     """
-    from .registration import _rotation
-
     T = np.array(T_group_fragment, dtype=float, copy=True)
     m = len(T)
     cos_tol = np.cos(np.radians(normal_angle))
@@ -418,7 +435,7 @@ def refine(
             x = np.linalg.solve(AtA + 1e-6 * scale * np.eye(len(AtA)), Atb)
             for k, c in col.items():
                 step = np.eye(4)
-                step[:3, :3] = _rotation(x[c:c + 3])
+                step[:3, :3] = rotation_from_vector(x[c:c + 3])
                 step[:3, 3] = x[c + 3:c + 6]
                 T[k] = step @ T[k]
             pairs = touching  # the motions are small: pairs apart now stay apart in this level

@@ -1,8 +1,13 @@
-"""Command line: parsing only. Heavy libraries are imported inside the commands."""
+"""Command line: parsing only. Heavy libraries are imported inside the commands.
+
+The defaults of the options are those of :class:`config.Config` (and of the functions the
+commands call), shown in the help; an option given sets one value of the command's Config.
+"""
 
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import logging
 import sys
@@ -35,17 +40,30 @@ def _number(text: str) -> float:
 
 
 def _cmd_break(args: argparse.Namespace) -> int:
-    from .pipeline import break_to_folder
+    from .config import Config
+    from .puzzle import break_to_folder
     from .synth import BreakParams
 
-    params = BreakParams(
-        pieces=args.pieces, roughness=args.roughness, cut_edge=args.cut_edge, noise=args.noise,
-        chips=args.chips, chip_size=args.chip_size, decimate=args.decimate, gap=args.gap, scale=args.scale,
-    )
-    out = break_to_folder(args.mesh, args.out, params=params, seed=args.seed, force=args.force,
-                          fill_holes=args.fill_holes)
-    print(f"wrote {args.pieces} fragments and the ground truth to {out}/")
+    config = _config(args, base=Config(break_=BreakParams(pieces=args.pieces)))
+    out = break_to_folder(args.mesh, args.out, params=config.break_, seed=config.seed, force=args.force,
+                          fill_holes=config.fill_holes)
+    print(f"wrote {config.break_.pieces} fragments and the ground truth to {out}/")
     return 0
+
+
+def _config(args: argparse.Namespace, *, base=None):
+    """The command's Config: ``--config`` (or ``base``, or the defaults), then the options
+    given, then every ``--set``."""
+    from .config import Config, read_config, with_setting, with_value
+
+    config = read_config(args.config) if getattr(args, "config", None) else base or Config()
+    for dest, value in vars(args).items():
+        if dest.startswith(_SET):
+            config = with_value(config, dest[len(_SET):], value)
+    for setting in getattr(args, "set", None) or []:
+        config = with_setting(config, setting)
+    config.check()
+    return config
 
 
 def _radii(text: str) -> list[float]:
@@ -94,8 +112,48 @@ def _fraction(text: str) -> float:
     return value
 
 
-def _add_fill_holes(p) -> None:
-    p.add_argument("--fill-holes", type=_fraction, nargs="?", const=FILL_HOLES, default=None, metavar="MAX",
+_SET = "set:"  # argparse dest prefix of an option that sets one value of the Config: "set:segment.crease_angle"
+
+
+def _g(value) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _size_text(value: float) -> str:
+    for unit, factor in (("T", 1e12), ("G", 1e9), ("M", 1e6), ("k", 1e3)):
+        if value >= factor and value % factor == 0:
+            return f"{value / factor:g}{unit}"
+    return f"{value:g}"
+
+
+def _auto(value) -> str:
+    return "auto" if value is None else _g(value)
+
+
+def _option(p, flag: str, path: str, *, help: str, defaults=None, show=_g, **kwargs) -> None:
+    """An option that sets the value at ``path`` of the command's Config (``segment.crease_angle``);
+    its default, shown in the help, is the Config's (or that of the dataclass ``defaults``)."""
+    from .config import default
+
+    value = default(path) if defaults is None else getattr(defaults, path.rpartition(".")[2])
+    if "action" not in kwargs:
+        kwargs.setdefault("metavar", flag.lstrip("-").upper().replace("-", "_"))
+    p.add_argument(flag, dest=_SET + path, default=argparse.SUPPRESS,
+                   help=f"{help} (default {show(value)})" if show else help, **kwargs)
+
+
+def _add_config(p) -> None:
+    p.add_argument("--config", type=Path, metavar="CONFIG_JSON",
+                   help="start from the options of this config.json (a run's, to repeat it); the options "
+                   "given here and --set change it")
+    p.add_argument("--set", action="append", metavar="SECTION.NAME=VALUE",
+                   help="change one option of the configuration, e.g. segment.crease_angle=25 (repeatable; "
+                   "every option is in a run's config.json)")
+
+
+def _add_fill_holes(p, *, dest: str = _SET + "fill_holes") -> None:
+    p.add_argument("--fill-holes", type=_fraction, nargs="?", const=FILL_HOLES, dest=dest, metavar="MAX",
+                   default=argparse.SUPPRESS if dest.startswith(_SET) else None,
                    help="close the holes of open scans with flat patches, those up to MAX of the mesh's "
                    f"bounding-box diagonal (default {FILL_HOLES} when given; without it an open mesh is refused)")
 
@@ -111,13 +169,10 @@ def _cmd_describe(args: argparse.Namespace) -> int:
     from .descriptors import DescriptorParams
     from .pipeline import describe_to_file
 
-    params = DescriptorParams(
-        resolution=args.resolution, d2_resolution=args.d2_resolution, with_d2=not args.no_d2,
-        principal=args.principal, max_memory=args.max_memory,
-    )
+    given = {dest[len(_SET):].partition(".")[2]: value for dest, value in vars(args).items() if dest.startswith(_SET)}
     summary = describe_to_file(
-        args.mesh, args.out, radii=args.radii, relative=args.relative, params=params, force=args.force,
-        fill_holes=args.fill_holes,
+        args.mesh, args.out, radii=args.radii, relative=args.relative, params=DescriptorParams(**given),
+        force=args.force, fill_holes=args.fill_holes,
     )
     radii = ", ".join(f"{r:.4g}" for r in summary["radii"])
     print(f"{summary['vertices']} vertices, radii {radii}: {summary['timings']['total']:.2f} s -> {args.out}")
@@ -151,7 +206,7 @@ def _format_report(report: dict) -> str:
 
 def _cmd_eval(args: argparse.Namespace) -> int:
     from .files import write_json
-    from .pipeline import evaluate_files
+    from .puzzle import evaluate_files
 
     report = evaluate_files(args.predicted, args.ground_truth, n_points=args.points, seed=args.seed)
     if args.out:
@@ -164,13 +219,10 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _cmd_match(args: argparse.Namespace) -> int:
-    from .pipeline import MatchConfig, match_to_folder
+    from .pipeline import match_to_folder
 
-    summary = match_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                              config=MatchConfig(max_memory=args.max_memory, gap=args.gap,
-                                                 thin_walls=args.thin_walls, fill_holes=args.fill_holes),
-                              jobs=_jobs(args),
-                              progress=not args.quiet)
+    summary = match_to_folder(args.inputs, args.out, config=_config(args), force=args.force, debug=args.debug_files,
+                              jobs=_jobs(args), progress=not args.quiet)
     print(f"{summary['fragments']} fragments, {summary['pairs']} pairs, {summary['touching']} touching:")
     for p in summary["pair_list"]:
         best = p["candidates"][0] if p["candidates"] else None
@@ -200,13 +252,10 @@ def _print_run(report: dict, out: Path) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .pipeline import MatchConfig, run_to_folder
+    from .pipeline import run_to_folder
 
-    report = run_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
-                           config=MatchConfig(max_memory=args.max_memory, gap=args.gap,
-                                              thin_walls=args.thin_walls, fill_holes=args.fill_holes),
-                           jobs=_jobs(args),
-                           progress=not args.quiet)
+    report = run_to_folder(args.inputs, args.out, config=_config(args), force=args.force, debug=args.debug_files,
+                           jobs=_jobs(args), progress=not args.quiet)
     _print_run(report, args.out)
     if args.render or args.viewer:
         _view(args.out, render=args.render, viewer=args.viewer, progress=not args.quiet)
@@ -262,7 +311,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
     parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for add in (_add_break, _add_describe, _add_eval, _add_match, _add_run):
+        add(sub)
+    return parser
 
+
+def _add_break(sub) -> None:
     p = sub.add_parser(
         "break",
         help="break a closed mesh into a synthetic puzzle with ground truth",
@@ -272,27 +326,28 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("mesh", help="closed mesh file, or the name of a bundled mesh (e.g. spot, torus)")
     p.add_argument("--pieces", type=_int_at_least(2), required=True, help="number of fragments (>= 2)")
-    p.add_argument("--seed", type=_int_at_least(0), default=0, help="random seed (default 0)")
+    _option(p, "--seed", "seed", type=_int_at_least(0), help="random seed")
     p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
     p.add_argument("--force", action="store_true", help="replace an existing output folder")
-    p.add_argument("--roughness", type=_number, default=0.08,
-                   help="RMS height of the cut surfaces / radius of the piece cut (default 0.08)")
-    p.add_argument("--cut-edge", type=_number, default=0.008,
-                   help="edge length of cut surfaces / object diagonal (default 0.008)")
-    p.add_argument("--noise", type=_number, default=0.0,
-                   help="Gaussian vertex noise sigma / object diagonal (default 0)")
-    p.add_argument("--chips", type=_number, default=0.0,
-                   help="mean number of chips knocked off each fragment's break edge (default 0)")
-    p.add_argument("--chip-size", type=_number, default=0.02,
-                   help="typical chip radius / object diagonal (default 0.02)")
-    p.add_argument("--decimate", type=_number, default=0.0,
-                   help="simplify fragments to this tolerance / object diagonal (default 0: off)")
-    p.add_argument("--gap", type=_number, default=0.0,
-                   help="material lost at the break: mating surfaces end this far apart / diagonal (default 0)")
-    p.add_argument("--scale", type=_number, default=1.0,
-                   help="scale the mesh first, e.g. 1000 for metres to millimetres (default 1)")
+    for flag, help in (
+        ("--roughness", "RMS height of the cut surfaces / radius of the piece cut"),
+        ("--cut-edge", "edge length of cut surfaces / object diagonal"),
+        ("--noise", "Gaussian vertex noise sigma / object diagonal"),
+        ("--chips", "mean number of chips knocked off each fragment's break edge"),
+        ("--chip-size", "typical chip radius / object diagonal"),
+        ("--decimate", "simplify fragments to this tolerance / object diagonal (0: off)"),
+        ("--gap", "material lost at the break: mating surfaces end this far apart / diagonal"),
+        ("--scale", "scale the mesh first, e.g. 1000 for metres to millimetres"),
+    ):
+        _option(p, flag, "break." + flag[2:].replace("-", "_"), type=_number, help=help)
     _add_fill_holes(p)
+    p.add_argument("--set", action="append", metavar="break.NAME=VALUE",
+                   help="change one option of the break (synth.BreakParams), e.g. break.hurst=0.5 (repeatable)")
     p.set_defaults(func=_cmd_break)
+
+
+def _add_describe(sub) -> None:
+    from .descriptors import DescriptorParams
 
     p = sub.add_parser(
         "describe",
@@ -307,18 +362,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--relative", action="store_true", help="radii are fractions of the bounding-box diagonal")
     p.add_argument("--out", type=Path, required=True, help="output .npz file")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
-    p.add_argument("--resolution", type=_number, default=8.0,
-                   help="voxels per radius of the occupancy grids, at least (default 8)")
-    p.add_argument("--d2-resolution", type=_number, default=4.0,
-                   help="voxels per radius of the squared-distance grids (default 4)")
-    p.add_argument("--no-d2", action="store_true", help="skip D2_r and K2 (the slow part)")
-    p.add_argument("--principal", action="store_true",
-                   help="also principal curvatures k1, k2, K2_cov, directions dir1 and normals "
-                   "from the covariance of ball and solid (robust to noise, unlike K2 from D2)")
-    p.add_argument("--max-memory", type=_bytes, default=4e9,
-                   help="working memory allowed for one grid, e.g. 4G (default)")
-    _add_fill_holes(p)
+    descriptor = DescriptorParams()
+    _option(p, "--resolution", "describe.resolution", type=_number, defaults=descriptor,
+            help="voxels per radius of the occupancy grids, at least")
+    _option(p, "--d2-resolution", "describe.d2_resolution", type=_number, defaults=descriptor,
+            help="voxels per radius of the squared-distance grids")
+    _option(p, "--no-d2", "describe.with_d2", action="store_false", show=None,
+            help="skip D2_r and K2 (the slow part)")
+    _option(p, "--principal", "describe.principal", action="store_true", show=None,
+            help="also principal curvatures k1, k2, K2_cov, directions dir1 and normals "
+            "from the covariance of ball and solid (robust to noise, unlike K2 from D2)")
+    _option(p, "--max-memory", "describe.max_memory", type=_bytes, defaults=descriptor, show=_size_text,
+            help="working memory allowed for one grid, e.g. 4G")
+    _add_fill_holes(p, dest="fill_holes")
     p.set_defaults(func=_cmd_describe)
+
+
+def _add_eval(sub) -> None:
+    from .puzzle import evaluate_files
 
     p = sub.add_parser(
         "eval",
@@ -331,17 +392,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("ground_truth", type=Path, help="ground_truth.json of the puzzle (fragments/ beside it)")
     p.add_argument("--json", action="store_true", help="print the full report as JSON")
     p.add_argument("--out", type=Path, help="also write the full report to this JSON file")
-    p.add_argument("--points", type=_int_at_least(10), default=1000, help="points sampled per fragment")
-    p.add_argument("--seed", type=_int_at_least(0), default=0, help="seed of the point samples")
+    scoring = inspect.signature(evaluate_files).parameters
+    p.add_argument("--points", type=_int_at_least(10), default=scoring["n_points"].default,
+                   help="points sampled per fragment (default %(default)s)")
+    p.add_argument("--seed", type=_int_at_least(0), default=scoring["seed"].default,
+                   help="seed of the point samples (default %(default)s)")
     p.set_defaults(func=_cmd_eval)
-    _add_match(sub)
-    _add_run(sub)
-    return parser
 
 
-def _add_common(p, *, seed: int = 0) -> None:
+def _add_common(p) -> None:
     p.add_argument("--force", action="store_true", help="replace an existing output folder")
-    p.add_argument("--seed", type=_int_at_least(0), default=seed, help=f"random seed (default {seed})")
     p.add_argument("--jobs", type=_int_at_least(0), default=0,
                    help="processes for descriptors and pairwise registration (default 0: one per available core)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -354,20 +414,25 @@ def _add_inputs(p) -> None:
     p.add_argument("--debug-files", action="store_true",
                    help="also write fracture labels as vertex colours (labels/*.ply) and matched keypoints per "
                    "pair (matches/)")
-    p.add_argument("--max-memory", type=_bytes, default=4e9,
-                   help="working memory one fragment's descriptor grid may take, e.g. 4G (default); a fragment "
-                   "that needs more is left out with a note")
-    p.add_argument("--gap", type=_gap, default=None,
-                   help="how far apart mating fracture surfaces are (material lost at the break), a fraction of "
-                   "the median fragment's bounding-box diagonal; 'auto' (default): measured from the pairs")
-    p.add_argument("--thin-walls", type=_thin_walls, default=None,
-                   help="match as thin-walled sherds, along their break strips: 'auto' (default: when most "
-                   "fragments are walls under 8 %% of their diagonal thick), 'yes' or 'no'")
+    _option(p, "--seed", "seed", type=_int_at_least(0), help="random seed")
+    _option(p, "--max-memory", "describe.max_memory", type=_bytes, show=_size_text,
+            help="working memory one fragment's descriptor grid may take, e.g. 4G; a fragment that needs "
+            "more is left out with a note")
+    _option(p, "--gap", "gap", type=_gap, show=_auto,
+            help="how far apart mating fracture surfaces are (material lost at the break), a fraction of the "
+            "median fragment's bounding-box diagonal; 'auto': measured from the pairs")
+    _option(p, "--thin-walls", "thin_walls", type=_thin_walls, show=_auto,
+            help="match as thin-walled sherds, along their break strips: 'auto' (when most fragments are "
+            "walls under 8 %% of their diagonal thick), 'yes' or 'no'")
     _add_fill_holes(p)
+    _add_config(p)
     _add_common(p)
 
 
 def _add_run(sub) -> None:
+    from .demo import demo_to_folder
+    from .view import view_folder
+
     p = sub.add_parser(
         "run",
         help="assemble a folder of fragments into the object",
@@ -397,7 +462,9 @@ def _add_run(sub) -> None:
     p.add_argument("--radius", type=_number,
                    help="descriptor radius of the curvature pictures, a fraction of the reference size "
                    "(one of the run's radii; default the middle one)")
-    p.add_argument("--size", type=_size, default=(640, 480), help="size of one view, WIDTHxHEIGHT (default 640x480)")
+    view = inspect.signature(view_folder).parameters
+    size = (view["width"].default, view["height"].default)
+    p.add_argument("--size", type=_size, default=size, help=f"size of one view, WIDTHxHEIGHT (default {size[0]}x{size[1]})")
     p.add_argument("--no-pictures", action="store_true", help="write report.html without rendering pictures")
     p.add_argument("--viewer", action="store_true", help="open an interactive 3D window (needs a display)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -411,10 +478,14 @@ def _add_run(sub) -> None:
         "ground truth (OUT/result/score.json) and writes the pictures and OUT/result/report.html.",
     )
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
-    p.add_argument("--mesh", default="spot", help="bundled mesh name or a closed mesh file (default spot)")
-    p.add_argument("--pieces", type=_int_at_least(2), default=8, help="number of fragments (default 8)")
+    demo = inspect.signature(demo_to_folder).parameters
+    p.add_argument("--mesh", default=demo["mesh"].default,
+                   help="bundled mesh name or a closed mesh file (default %(default)s)")
+    p.add_argument("--pieces", type=_int_at_least(2), default=demo["pieces"].default,
+                   help="number of fragments (default %(default)s)")
+    p.add_argument("--seed", type=_int_at_least(0), default=demo["seed"].default, help="random seed (default %(default)s)")
     p.add_argument("--no-render", action="store_true", help="skip the pictures and report.html")
-    _add_common(p, seed=1)
+    _add_common(p)
     p.set_defaults(func=_cmd_demo)
 
 

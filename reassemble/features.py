@@ -18,6 +18,27 @@ from .geometry import face_areas, face_normals, sample_surface
 from .segmentation import Segmentation
 
 
+@dataclass(frozen=True)
+class FeatureParams:
+    """Options of the features stage; lengths are fractions of the reference size.
+
+    Parameters
+    ----------
+    keypoint_spacing : spacing of fracture keypoints
+    shell_spacing : keypoint spacing of thin-walled sherds, as a multiple of ``keypoint_spacing``
+    samples : fracture and surface samples per fragment (ICP, contact, penetration)
+    signature_radii : the signatures use this many of the finest descriptor radii (None:
+        all of them); two by default: the coarsest ball reaches past a small contact into
+        the air and other fragments, and with it the signatures of small mating faces
+        disagree (``benchmarks/pairwise.py --signature-radii``)
+    """
+
+    keypoint_spacing: float = 0.015
+    shell_spacing: float = 2.0
+    samples: int = 4000
+    signature_radii: int | None = 2
+
+
 @dataclass
 class FractureSurface:
     """What registration needs of one fragment.

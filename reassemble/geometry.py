@@ -47,6 +47,16 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     return Rotation.random(random_state=rng).as_matrix()
 
 
+def rotation_from_vector(w: np.ndarray) -> np.ndarray:
+    """Rotation matrix of the rotation vector ``w`` (3,) (Rodrigues): the step of a linearized solve."""
+    angle = float(np.linalg.norm(w))
+    if angle < 1e-15:
+        return np.eye(3)
+    k = w / angle
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
 def is_rigid(T: np.ndarray, *, atol: float = 1e-6) -> bool:
     """True when ``T`` is a finite 4x4 proper rigid transform."""
     T = np.asarray(T, dtype=np.float64)

@@ -7,12 +7,12 @@ its presence means the run completed.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
+from .config import CONFIG_FORMAT, to_dict
 from .files import TRANSFORMS_CONVENTION, staged_directory, write_glb, write_json, write_npz, write_ply
 from .geometry import transform_points
 from .prepare import PreparedFragment, set_noise, thin_walled
@@ -75,39 +75,37 @@ def write_debug(tmp: Path, frags: list[PreparedFragment], results: dict) -> None
                   T_target_source=res.best.T_target_source)
 
 
-def resolved_config(result, config, **stages) -> dict:
-    """``config.json``: the options of the run with what was decided from the data filled in."""
+def config_json(result) -> dict:
+    """``config.json``: the run's Config, resolved from the data (:func:`config.read_config`
+    reads it back), and the reference size and vertex noise it was resolved from."""
     size = result.size
-    out = {"seed": result.seed, "reference_size": size, "vertex_noise": set_noise(result.fragments) / size}
-    stages = {"match": dataclasses.replace(config, thin_walls=thin_walled(result.fragments)), **stages}
-    out.update({k: dataclasses.asdict(v) for k, v in stages.items()})
-    out["note"] = ("lengths in the stage options and vertex_noise are fractions of reference_size "
-                   "(the median fragment bounding-box diagonal); registration.tolerance is at least "
-                   "noise_tolerance x sqrt(2) x vertex_noise")
-    return out
+    return {"format": CONFIG_FORMAT, **to_dict(result.config), "reference_size": size,
+            "vertex_noise": set_noise(result.fragments) / size,
+            "note": "lengths are fractions of reference_size (the median fragment bounding-box diagonal), "
+                    "as vertex_noise; registration.tolerance is at least registration.noise_tolerance x "
+                    "sqrt(2) x vertex_noise"}
 
 
-def write_match_folder(out, result, config, *, warnings: list[str], force: bool, debug: bool) -> None:
+def write_match_folder(out, result, *, warnings: list[str], force: bool, debug: bool) -> None:
     """``pairs.json``, ``fragments.json``, ``config.json`` (+ debug files) of :func:`pipeline.match_to_folder`."""
     frags = result.fragments
     with staged_directory(out, force=force) as tmp:
         write_json(tmp / "pairs.json", _pairs_file(frags, result.pairs))
         write_json(tmp / "fragments.json", {"fragments": {f.name: fragment_entry(f) for f in frags},
                                             "warnings": warnings})
-        write_json(tmp / "config.json", resolved_config(result, config, segmentation=result.segment,
-                                                        registration=result.registration))
+        write_json(tmp / "config.json", config_json(result))
         if debug:
             write_debug(tmp, frags, result.pairs)
 
 
-def analysis_arrays(frags: list[PreparedFragment], contacts, touching, *, size: float, config) -> dict:
+def analysis_arrays(frags: list[PreparedFragment], contacts, touching, *, size: float, radii) -> dict:
     """Arrays of ``analysis.npz``: ``names`` (n,), ``radii`` (r,) in mesh units and
     ``radii_relative``; per fragment k ``fracture_k`` (faces,) int8 and, when it has
     descriptors, ``H_k`` (faces, r) float32 mean curvature at the face centres; per contact i
     (``contact_pairs`` (c, 2) fragment indices) ``contact_i_a`` / ``contact_i_b`` (p, 3)
     touching points, each in its own fragment's coordinates."""
-    arrays = {"names": np.array([f.name for f in frags]), "radii": size * np.asarray(config.radii, float),
-              "radii_relative": np.asarray(config.radii, float),
+    arrays = {"names": np.array([f.name for f in frags]), "radii": size * np.asarray(radii, float),
+              "radii_relative": np.asarray(radii, float),
               "contact_pairs": np.array([[c.a, c.b] for c in contacts], np.int64).reshape(-1, 2)}
     for k, f in enumerate(frags):
         arrays[f"fracture_{k}"] = f.segmentation.fracture.astype(np.int8)
@@ -128,7 +126,7 @@ def transforms_json(result) -> dict:
     A, names = result.assembly, [f.name for f in result.fragments]
     return {
         "format": TRANSFORMS_FORMAT, "convention": TRANSFORMS_CONVENTION, "version": __version__,
-        "seed": result.seed,
+        "seed": result.config.seed,
         "world": f"the coordinates of fragment {names[_largest(A, result.fragments)]!r}'s file "
                  "(the largest fragment of the main assembly)",
         "fragments": {
@@ -161,7 +159,7 @@ def _fragment_report(result, groups) -> dict:
 
 def run_report(result, *, warnings: list[str]) -> dict:
     """``report.json``: a summary, the sub-assemblies, each fragment, each contact, the warnings."""
-    A, frags, size, reg = result.assembly, result.fragments, result.size, result.registration
+    A, frags, size, reg = result.assembly, result.fragments, result.size, result.config.registration
     names = [f.name for f in frags]
     groups = [[names[k] for k in np.flatnonzero(A.group == g)] for g in range(int(A.group.max()) + 1)]
     return {
@@ -199,17 +197,15 @@ def _write_assembled(tmp: Path, result) -> None:
                   colors=np.vstack([np.tile(colors[k], (len(frags[k].vertices), 1)) for k in placed]))
 
 
-def write_run_folder(out, result, config, *, report: dict, force: bool, debug: bool) -> None:
+def write_run_folder(out, result, *, report: dict, force: bool, debug: bool) -> None:
     """The files of :func:`pipeline.run_to_folder`, ``transforms.json`` last."""
     frags = result.fragments
     with staged_directory(out, force=force) as tmp:
         write_json(tmp / "pairs.json", _pairs_file(frags, result.pairs))
         write_json(tmp / "report.json", report)
-        write_json(tmp / "config.json", resolved_config(result, config, segmentation=result.segment,
-                                                        registration=result.registration,
-                                                        assembly=result.assembly_params))
+        write_json(tmp / "config.json", config_json(result))
         write_npz(tmp / "analysis.npz", **analysis_arrays(frags, result.assembly.contacts, result.touching,
-                                                          size=result.size, config=config))
+                                                          size=result.size, radii=result.config.radii))
         _write_assembled(tmp, result)
         if debug:
             write_debug(tmp, frags, result.pairs)

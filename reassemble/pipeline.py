@@ -17,22 +17,20 @@ from pathlib import Path
 import numpy as np
 
 from . import assembly
-from .config import MatchConfig
+from .config import Config
 from .descriptors import DescriptorParams, integral_invariants
 from .errors import ReassembleError
 from .files import check_output_folder, load_mesh, resolve_mesh_path, write_npz
 from .inputs import load_fragments
 from .outputs import pairs_json, run_report, write_match_folder, write_run_folder
 from .pairs import match_pairs, match_set, registration_params
-from .prepare import DescribedSet, PreparedFragment, describe_fragments, prepare_fragments, reference_size
+from .prepare import DescribedSet, PreparedFragment, describe_fragments, prepare_fragments, reference_size, thin_walled
 from .puzzle import PuzzleFiles, break_to_folder, evaluate_files, read_puzzle
-from .registration import RegistrationParams
-from .segmentation import SegmentParams
 
 log = logging.getLogger(__name__)
 
 __all__ = [  # the stages' entry points, and the puzzle files, importable from here
-    "DescribedSet", "MatchConfig", "PreparedFragment", "PuzzleFiles", "Result", "break_to_folder",
+    "Config", "DescribedSet", "PreparedFragment", "PuzzleFiles", "Result", "break_to_folder",
     "describe_fragments", "describe_to_file", "evaluate_files", "match_pairs", "match_set", "match_to_folder",
     "prepare_fragments", "read_puzzle", "reassemble", "reference_size", "registration_params", "run_to_folder",
 ]
@@ -44,11 +42,11 @@ class Result:
 
     Attributes
     ----------
+    config : the Config of the run, with what was decided from the data filled in
+        (``thin_walls``; ``gap`` and the registration tolerance measured): run again with
+        it, the same fragments give the same result
     fragments : PreparedFragment per fragment (descriptors, segmentation, fracture features)
     size : reference size (:func:`prepare.reference_size`), mesh units
-    seed : the random seed of the run
-    segment, registration, assembly_params : the stage options used, resolved from the data
-        (registration: tolerance from the noise, ``gap`` measured)
     pairs : (source, target) index pair -> registration.PairResult
     assembly : assembly.Assembly, None when only the pairs were matched
     T_world : (n, 4, 4) T_world_fragment per fragment (:func:`assembly.world_poses`)
@@ -56,12 +54,9 @@ class Result:
     timings : seconds per step
     """
 
+    config: Config
     fragments: list[PreparedFragment]
     size: float
-    seed: int
-    segment: SegmentParams
-    registration: RegistrationParams
-    assembly_params: assembly.AssemblyParams | None
     pairs: dict
     assembly: assembly.Assembly | None = None
     T_world: np.ndarray | None = None
@@ -70,9 +65,8 @@ class Result:
 
 
 def reassemble(
-    meshes: dict[str, tuple[np.ndarray, np.ndarray]], config: MatchConfig = MatchConfig(), *, seed: int = 0,
-    assembly_params: assembly.AssemblyParams | None = None, assemble: bool = True, jobs: int = 1,
-    progress: bool = False,
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]], config: Config = Config(), *, assemble: bool = True,
+    jobs: int = 1, progress: bool = False,
 ) -> Result:
     """Reassemble fragments given as name -> (vertices (n, 3), faces (f, 3)), in memory.
 
@@ -81,16 +75,16 @@ def reassemble(
     result does not depend on it.
     """
     t0 = time.perf_counter()
-    seg_params = SegmentParams()
-    frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,
+    frags, size = prepare_fragments(meshes, config=config, seed=config.seed, jobs=jobs,
                                     progress=progress)  # describe, segment, features
-    reg_params = registration_params(frags, size=size, params=RegistrationParams())
+    registration = registration_params(frags, size=size, params=config.registration)
     t1 = time.perf_counter()
-    pairs, reg_params = match_set(frags, size=size, params=reg_params, gap=config.gap, seed=seed, jobs=jobs,
-                                  progress=progress)
+    pairs, registration = match_set(frags, size=size, params=registration, gap=config.gap, seed=config.seed,
+                                    jobs=jobs, progress=progress)
     t2 = time.perf_counter()
-    result = Result(frags, size, seed, seg_params, reg_params, assembly_params or assembly.AssemblyParams(), pairs,
-                    timings={"prepare": t1 - t0, "pairs": t2 - t1})
+    resolved = dataclasses.replace(config, thin_walls=thin_walled(frags), gap=registration.gap,
+                                   registration=registration)
+    result = Result(resolved, frags, size, pairs, timings={"prepare": t1 - t0, "pairs": t2 - t1})
     if assemble:
         _assemble(result, progress=progress)
         result.timings["assembly"] = time.perf_counter() - t2
@@ -99,29 +93,32 @@ def reassemble(
 
 def _assemble(result: Result, *, progress: bool) -> None:
     """The assemble step: global assembly, world poses, touching points of every contact."""
-    frags, size, reg = result.fragments, result.size, result.registration
+    frags, size, config, reg = result.fragments, result.size, result.config, result.config.registration
     if progress:
         log.info("assembling %d fragments", len(frags))
     surfaces, meshes = [f.surface for f in frags], [f.mesh for f in frags]
-    result.assembly = assembly.assemble(surfaces, meshes, result.pairs, size=size, params=result.assembly_params,
-                                        reg_params=reg, seed=result.seed)
-    result.T_world = assembly.world_poses(result.assembly, surfaces, gap=0.1 * size)
+    result.assembly = assembly.assemble(surfaces, meshes, result.pairs, size=size, params=config.assembly,
+                                        reg_params=reg, seed=config.seed)
+    result.T_world = assembly.world_poses(result.assembly, surfaces, gap=config.assembly.world_gap * size)
     result.touching = assembly.contact_points(result.assembly, surfaces, meshes, tol=reg.tolerance * size,
-                                              normal_angle=reg.normal_angle, gap=reg.gap * size)
+                                              normal_angle=reg.normal_angle, count=config.assembly.touching_points,
+                                              gap=reg.gap * size)
 
 
-def _load(inputs, out, *, config: MatchConfig, force: bool):
+def _load(inputs, out, *, config: Config, seed: int | None, force: bool):
     """The set-up of run and match: refuse an existing output first (before minutes of
-    work, not after), then read the fragments. Returns (meshes, warnings, seconds)."""
+    work, not after), then read the fragments. Returns (meshes, warnings, config with
+    ``seed``, seconds)."""
     t0 = time.perf_counter()
     check_output_folder(out, force=force)
     meshes, warnings = load_fragments(inputs, fill_holes=config.fill_holes)
-    return meshes, warnings, time.perf_counter() - t0
+    config = config if seed is None else dataclasses.replace(config, seed=seed)
+    return meshes, warnings, config, time.perf_counter() - t0
 
 
 def match_to_folder(
-    inputs: list[str | Path], out: str | Path, *, seed: int = 0, force: bool = False, debug: bool = False,
-    config: MatchConfig = MatchConfig(), jobs: int = 1, progress: bool = False,
+    inputs: list[str | Path], out: str | Path, *, config: Config = Config(), seed: int | None = None,
+    force: bool = False, debug: bool = False, jobs: int = 1, progress: bool = False,
 ) -> dict:
     """Segment the fragments, register every pair, and write ``pairs.json`` (+ debug files).
 
@@ -130,19 +127,19 @@ def match_to_folder(
     areas) and verdict, ``fragments.json`` (fracture area, regions, warnings per fragment),
     ``config.json`` (the resolved configuration); with ``debug``, ``labels/NAME.ply``
     (fracture faces' vertices red) and ``matches/SOURCE__TARGET.npz`` (matched keypoints of
-    the best candidate, each in its own fragment's frame).
+    the best candidate, each in its own fragment's frame). ``seed``: instead of ``config.seed``.
     """
-    meshes, warnings, _ = _load(inputs, out, config=config, force=force)
-    result = reassemble(meshes, config, seed=seed, assemble=False, jobs=jobs, progress=progress)
-    write_match_folder(out, result, config, warnings=warnings, force=force, debug=debug)
+    meshes, warnings, config, _ = _load(inputs, out, config=config, seed=seed, force=force)
+    result = reassemble(meshes, config, assemble=False, jobs=jobs, progress=progress)
+    write_match_folder(out, result, warnings=warnings, force=force, debug=debug)
     pairs = pairs_json(result.fragments, result.pairs)
     return {"fragments": len(result.fragments), "pairs": len(pairs), "touching": sum(p["touching"] for p in pairs),
             "warnings": warnings, "pair_list": pairs}
 
 
 def run_to_folder(
-    inputs: list[str | Path], out: str | Path, *, seed: int = 0, force: bool = False, debug: bool = False,
-    config: MatchConfig = MatchConfig(), assembly_params=None, jobs: int = 1, progress: bool = False,
+    inputs: list[str | Path], out: str | Path, *, config: Config = Config(), seed: int | None = None,
+    force: bool = False, debug: bool = False, jobs: int = 1, progress: bool = False,
 ) -> dict:
     """The main job: fragments in, the assembled object and its report out.
 
@@ -151,17 +148,18 @@ def run_to_folder(
     ``T_world_fragment``, ``placed``, ``confidence``, ``group``), ``assembled.glb`` (one
     named node per fragment, its pose as the node transform), ``assembled.ply`` (the placed
     fragments in world coordinates, one colour each), ``report.json``, ``pairs.json``,
-    ``config.json``, ``analysis.npz`` (what :func:`view.view_folder` draws: per-face fracture
-    labels and mean curvature, the touching points of every contact); with ``debug`` the
-    files of :func:`match_to_folder`'s ``debug``.
+    ``config.json`` (:func:`config.read_config` reads it back), ``analysis.npz`` (what
+    :func:`view.view_folder` draws: per-face fracture labels and mean curvature, the
+    touching points of every contact); with ``debug`` the files of :func:`match_to_folder`'s
+    ``debug``. ``seed``: instead of ``config.seed``.
 
     Returns the report (a dict).
     """
-    meshes, warnings, seconds = _load(inputs, out, config=config, force=force)
-    result = reassemble(meshes, config, seed=seed, assembly_params=assembly_params, jobs=jobs, progress=progress)
+    meshes, warnings, config, seconds = _load(inputs, out, config=config, seed=seed, force=force)
+    result = reassemble(meshes, config, jobs=jobs, progress=progress)
     result.timings["prepare"] += seconds  # reading the files counts as preparing them
     report = run_report(result, warnings=warnings)
-    write_run_folder(out, result, config, report=report, force=force, debug=debug)
+    write_run_folder(out, result, report=report, force=force, debug=debug)
     return report
 
 

@@ -14,13 +14,13 @@ import logging
 import numpy as np
 from tqdm import tqdm
 
-from .config import MatchConfig
-from .descriptors import DescriptorParams, integral_invariants
+from .config import Config
+from .descriptors import integral_invariants
 from .errors import ReassembleError
 from .features import empty_surface, fracture_surface
 from .geometry import denoise, face_areas, taubin_smooth, vertex_noise
 from .parallel import pool_map
-from .segmentation import SegmentParams, Segmentation, segment
+from .segmentation import Segmentation, segment
 from .shells import is_thin_shell, strip_frames, strip_segmentation, wall_thickness
 
 log = logging.getLogger(__name__)
@@ -110,7 +110,7 @@ class DescribedSet:
 def describe_fragments(
     meshes: dict[str, tuple[np.ndarray, np.ndarray]],
     *,
-    config: MatchConfig = MatchConfig(),
+    config: Config = Config(),
     jobs: int = 1,
     progress: bool = False,
 ) -> DescribedSet:
@@ -123,7 +123,7 @@ def describe_fragments(
     pairs = [meshes[n] for n in names]
     size = reference_size(pairs)
     radii = size * np.asarray(config.radii)
-    params = DescriptorParams(with_d2=False, principal=True, max_memory=config.max_memory)
+    params = config.describe
     noise = [vertex_noise(v) for v, _ in pairs]
     # noise above a fifth of the finest radius swamps the finest scale: the crease angles,
     # face normals and finest invariants are noise (0.5 % of the diagonal, 4 pieces:
@@ -151,8 +151,7 @@ def describe_fragments(
 def prepare_fragments(
     meshes: dict[str, tuple[np.ndarray, np.ndarray]],
     *,
-    config: MatchConfig = MatchConfig(),
-    segment_params=None,
+    config: Config = Config(),
     seed: int = 0,
     jobs: int = 1,
     progress: bool = False,
@@ -165,42 +164,61 @@ def prepare_fragments(
     computed (``meshes`` is then ignored).
     Returns the prepared fragments (in sorted name order) and the reference size.
     """
-    if config.signature_radii is not None and not 1 <= config.signature_radii <= len(config.radii):
-        raise ReassembleError(f"signature_radii must be 1 to {len(config.radii)} (the descriptor radii), "
-                              f"got {config.signature_radii}")
-    n_signature = config.signature_radii or len(config.radii)  # one width for every fragment's signatures
+    config.check()
     if described is None:
         described = describe_fragments(meshes, config=config, jobs=jobs, progress=progress)
-    names, pairs, matched, size = described.names, described.meshes, described.matched, described.size
-    descriptors, notes, smoothing = described.descriptors, dict(described.notes), described.smoothing
-    good = [k for k, d in enumerate(descriptors) if d is not None]
-    segs = [None] * len(names)
-    thickness = {k: wall_thickness(matched[k], pairs[k][1]) for k in good}
+    good = [k for k, d in enumerate(described.descriptors) if d is not None]
+    thickness = {k: wall_thickness(described.matched[k], described.meshes[k][1]) for k in good}
+    segs, shell = segment_set(described, thickness, config=config, seed=seed)
+    return fracture_features(described, segs, thickness, shell=shell, config=config, seed=seed), described.size
+
+
+def segment_set(described: DescribedSet, thickness: dict[int, np.ndarray], *, config: Config, seed: int):
+    """The segment step: (Segmentation or None per fragment, whether they are thin-walled sherds).
+
+    Sherds (``config.thin_walls``, or None and most fragments are) are segmented along
+    their break strips (:func:`shells.strip_segmentation`), solids all together
+    (:func:`segmentation.segment`); ``thickness``: wall thickness of each described fragment.
+    """
+    matched, faces = described.matched, [f for _, f in described.meshes]
+    good = sorted(thickness)
+    segs = [None] * len(described.names)
     shell = config.thin_walls
     if shell is None:
-        shell = 2 * sum(is_thin_shell(matched[k], pairs[k][1], thickness[k]) for k in good) > len(good)
+        shell = 2 * sum(is_thin_shell(matched[k], faces[k], thickness[k]) for k in good) > len(good)
     if shell:
         log.info("thin-walled fragments (sherds): matched along their break strips")
         for k in good:
-            segs[k] = strip_segmentation(matched[k], pairs[k][1], thickness[k])
+            segs[k] = strip_segmentation(matched[k], faces[k], thickness[k])
     else:
-        for k, s in zip(good, segment([(matched[k], pairs[k][1]) for k in good], [descriptors[k] for k in good],
-                                      size=size, params=segment_params or SegmentParams(), seed=seed)):
+        for k, s in zip(good, segment([(matched[k], faces[k]) for k in good],
+                                      [described.descriptors[k] for k in good],
+                                      size=described.size, params=config.segment, seed=seed)):
             segs[k] = s
+    return segs, bool(shell)
+
+
+def fracture_features(described: DescribedSet, segs: list, thickness: dict[int, np.ndarray], *, shell: bool,
+                      config: Config, seed: int) -> list[PreparedFragment]:
+    """The features step: each fragment's keypoints, signatures and samples (:func:`features.fracture_surface`)."""
+    params = config.features
+    n_signature = params.signature_radii or len(config.radii)  # one width for every fragment's signatures
     # on sherds one keypoint pair is a hypothesis: the cost grows as the product of the
     # keypoint counts (at the solids' spacing ~700 per vessel sherd)
-    spacing = config.keypoint_spacing * size * (2.0 if shell else 1.0)
-    rngs = np.random.default_rng(seed).spawn(len(names))
+    spacing = params.keypoint_spacing * described.size * (params.shell_spacing if shell else 1.0)
+    notes, smoothing = dict(described.notes), described.smoothing
+    rngs = np.random.default_rng(seed).spawn(len(described.names))
     out = []
-    for k, (name, (given, f), v, d, s, rng, sigma) in enumerate(zip(names, pairs, matched, descriptors, segs, rngs,
-                                                                  described.noise)):
+    for k, (name, (given, f), v, d, s, rng, sigma) in enumerate(zip(
+            described.names, described.meshes, described.matched, described.descriptors, segs, rngs,
+            described.noise)):
         if s is None:
             s = Segmentation(np.zeros(len(f), bool), np.zeros(len(f)), np.zeros(len(f), int),
                              np.full(len(f), -1), 0.0, float(face_areas(v, f).sum()))
-            surf = empty_surface(v, f, n_radii=n_signature, n_samples=config.samples, rng=rng)
+            surf = empty_surface(v, f, n_radii=n_signature, n_samples=params.samples, rng=rng)
             log.warning("%s: %s", name, notes[name])
         else:
-            surf = fracture_surface(v, f, s, d, spacing=spacing, n_samples=config.samples,
+            surf = fracture_surface(v, f, s, d, spacing=spacing, n_samples=params.samples,
                                     signature_radii=n_signature, rng=rng)
             if shell and len(surf.keypoints):
                 n, t = strip_frames(v, f, thickness[k], surf.keypoints, surf.keypoint_normals)
@@ -210,7 +228,7 @@ def prepare_fragments(
                 log.warning("%s: %s", name, notes[name])
         out.append(PreparedFragment(name, given, f, d, s, surf, notes.get(name, ""), sigma, smoothing,
                                     v if smoothing else None, shell))
-    return out, size
+    return out
 
 
 def set_noise(fragments: list[PreparedFragment]) -> float:

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .features import FractureSurface, mate_signature, offset_surface
-from .geometry import invert_transform, rotation_angle_deg, transform_points
+from .geometry import invert_transform, rotation_angle_deg, rotation_from_vector, transform_points
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,18 @@ class RegistrationParams:
         ``tolerance``, and ICP keeps it (:func:`set_gap` measures it from the data)
     plane_consensus : a RANSAC inlier must also lie within ``tolerance`` of the target
         keypoint's tangent plane, not only within ``ransac_tolerance`` of it (:func:`ransac`)
+    shell_shortlist, shell_consensus_pool : ``shortlist`` and ``consensus_pool`` of
+        thin-walled sherds (:func:`pairs.registration_params`)
+    probe_radius : consensus probes are drawn within this multiple of ``pair_radius`` of a
+        hypothesis' anchor keypoint
+    probes, shell_probes : probes of the first consensus count of every hypothesis (solids,
+        sherds); fine_probes : of the second, for the best ``consensus_pool``
+    quick_samples, quick_surface_samples : fracture samples of the shortlist's quick ICP and
+        contact count, and surface samples of its penetration count
+    quick_iterations, quick_level : iterations of the quick ICP, at a distance threshold of
+        ``quick_level`` x ``tolerance``; quick_contact : contact distance of the quick count,
+        a multiple of ``tolerance``
+    refinements : up to this many times ``candidates`` shortlisted poses get the full ICP
     """
 
     tolerance: float = 0.006
@@ -72,6 +84,18 @@ class RegistrationParams:
     consensus_pool: int = 300
     gap: float = 0.0
     plane_consensus: bool = True
+    shell_shortlist: int = 100
+    shell_consensus_pool: int = 2000
+    probe_radius: float = 2.0
+    probes: int = 64
+    shell_probes: int = 32
+    fine_probes: int = 256
+    quick_samples: int = 1000
+    quick_surface_samples: int = 500
+    quick_iterations: int = 5
+    quick_level: float = 3.0
+    quick_contact: float = 1.5
+    refinements: int = 2
 
 
 def with_noise(params: RegistrationParams, *, noise: float, size: float) -> RegistrationParams:
@@ -205,9 +229,9 @@ def ransac(
     # over the whole fragment, a true contact of 5-10 % of the fracture surface scores no
     # better than chance overlaps of the rest (measured: every such pair lost)
     anchors = pairs[pick[idx[facing], 0], 0]
-    hoods = _neighbourhoods(source.keypoints, anchors, 2.0 * radius)
+    hoods = _neighbourhoods(source.keypoints, anchors, params.probe_radius * radius)
     return _consensus(T, anchors, source, target, cKDTree(target.keypoints), hoods, tol=tol, cos_tol=cos_tol,
-                      params=params, first=64, rng=rng, plane_tol=plane_tol)
+                      params=params, first=params.probes, rng=rng, plane_tol=plane_tol)
 
 
 def _consensus(T, anchors, source, target, tree, hoods, *, tol, cos_tol, params, first: int, rng, plane_tol=None):
@@ -219,7 +243,7 @@ def _consensus(T, anchors, source, target, tree, hoods, *, tol, cos_tol, params,
                                        cos_tol=cos_tol, plane_tol=plane_tol) for k in range(0, len(T), 20000)])
     top = np.argsort(-inliers, kind="stable")[: params.consensus_pool]
     T, anchors = T[top], anchors[top]
-    inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, 256, rng), tol=tol, cos_tol=cos_tol,
+    inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, params.fine_probes, rng), tol=tol, cos_tol=cos_tol,
                        plane_tol=plane_tol)
     best = np.argsort(-inliers, kind="stable")
     return T[best], inliers[best]
@@ -261,9 +285,9 @@ def frame_hypotheses(
         Tk[:, :3, 3] = target.keypoints[b] - np.einsum("hij,hj->hi", R, source.keypoints[a])
         T.append(Tk)
     T, anchors = np.concatenate(T), np.concatenate([a, a])
-    hoods = _neighbourhoods(source.keypoints, anchors, 2.0 * radius)
+    hoods = _neighbourhoods(source.keypoints, anchors, params.probe_radius * radius)
     return _consensus(T, anchors, source, target, cKDTree(target.keypoints), hoods, tol=tol,
-                      cos_tol=np.cos(np.radians(params.normal_angle)), params=params, first=32, rng=rng)
+                      cos_tol=np.cos(np.radians(params.normal_angle)), params=params, first=params.shell_probes, rng=rng)
 
 
 def pair_candidates(source: FractureSurface, target: FractureSurface, pairs: np.ndarray, *, radius: float) -> np.ndarray:
@@ -420,22 +444,12 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
             else:
                 x = np.linalg.lstsq(A, b, rcond=None)[0]
             step = np.eye(4)
-            step[:3, :3] = _rotation(x[:3])
+            step[:3, :3] = rotation_from_vector(x[:3])
             step[:3, 3] = x[3:6]
             T = step @ T
             if np.linalg.norm(x[:3]) < 1e-7 and np.linalg.norm(x[3:6]) < 1e-6 * tol and moved < 1e-6 * tol:
                 break
     return T, gap
-
-
-def _rotation(w: np.ndarray) -> np.ndarray:
-    """Rotation matrix of the rotation vector ``w`` (Rodrigues)."""
-    angle = float(np.linalg.norm(w))
-    if angle < 1e-15:
-        return np.eye(3)
-    k = w / angle
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
 def _within(points: np.ndarray, surf: FractureSurface, tol: float) -> np.ndarray:
@@ -553,6 +567,29 @@ def set_gap(
     return float(np.asarray(gaps)[order][np.searchsorted(cum, 0.5 * cum[-1])])
 
 
+def _quick_ranked(source, target, T, *, tree, target_scene, tol: float, rtol: float, params: RegistrationParams):
+    """[(quick score, hypothesis index, coarse pose)] of the shortlist (``params.shortlist``
+    distinct hypotheses), best first: a quick coarse ICP on ``params.quick_samples`` fracture
+    samples, then contact minus weighted penetration on them."""
+    cos_tol = np.cos(np.radians(params.normal_angle))
+    quick = []
+    n, m = params.quick_samples, params.quick_surface_samples
+    for i in _distinct(T, params.shortlist, tol=rtol):
+        coarse = icp(source, target, T[i], tol=tol, normal_angle=params.normal_angle, iterations=params.quick_iterations,
+                     levels=(params.quick_level,), tree=tree, n_points=n)
+        p = transform_points(coarse, source.samples[:n])
+        d, j = tree.query(p, distance_upper_bound=params.quick_contact * tol)
+        ok = np.isfinite(d)
+        ok[ok] = np.einsum("ij,ij->i", source.sample_normals[:n][ok] @ coarse[:3, :3].T,
+                           target.sample_normals[j[ok]]) < -cos_tol
+        inside = _inside(target_scene, transform_points(coarse, source.surface[:m]), tol)
+        # the same units as the full score: contact minus weighted penetration, as areas
+        quick.append((ok.sum() * source.sample_area * len(source.samples) / n
+                      - params.penetration_weight * inside * source.surface_area * len(source.surface) / m, i, coarse))
+    quick.sort(key=lambda q: -q[0])
+    return quick
+
+
 def register_pair(
     source: FractureSurface,
     target: FractureSurface,
@@ -598,24 +635,10 @@ def register_pair(
     from scipy.spatial import cKDTree
 
     tree = cKDTree(target.samples)
-    cos_tol = np.cos(np.radians(params.normal_angle))
-    quick = []
-    for i in _distinct(T, params.shortlist, tol=rtol):
-        coarse = icp(source, target, T[i], tol=tol, normal_angle=params.normal_angle, iterations=5,
-                     levels=(3.0,), tree=tree, n_points=1000)
-        p = transform_points(coarse, source.samples[:1000])
-        d, j = tree.query(p, distance_upper_bound=1.5 * tol)
-        ok = np.isfinite(d)
-        ok[ok] = np.einsum("ij,ij->i", source.sample_normals[:1000][ok] @ coarse[:3, :3].T,
-                           target.sample_normals[j[ok]]) < -cos_tol
-        inside = _inside(target_scene, transform_points(coarse, source.surface[:500]), tol)
-        # the same units as the full score: contact minus weighted penetration, as areas
-        quick.append((ok.sum() * source.sample_area * len(source.samples) / 1000
-                      - params.penetration_weight * inside * source.surface_area * len(source.surface) / 500, i, coarse))
-    quick.sort(key=lambda q: -q[0])
+    quick = _quick_ranked(source, target, T, tree=tree, target_scene=target_scene, tol=tol, rtol=rtol, params=params)
     # different hypotheses often converge to one pose: keep distinct ones, so the
     # assembly gets real alternatives (up to twice as many refinements as candidates)
-    for _, i, coarse in quick[: 2 * params.candidates]:
+    for _, i, coarse in quick[: params.refinements * params.candidates]:
         refined = icp(source, target, coarse, tol=tol, normal_angle=params.normal_angle, tree=tree)
         if _distinct(np.array([c.T_target_source for c in candidates] + [refined]), len(candidates) + 1,
                      tol=rtol)[-1:] != [len(candidates)]:

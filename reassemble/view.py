@@ -40,44 +40,12 @@ def view_folder(
     Returns a summary: pictures written, the page's path, why pictures were skipped.
     """
     from .geometry import decimate
-    from .files import glb_bytes, read_glb, write_bytes, write_text
+    from .files import glb_bytes, write_bytes, write_text
     from .viz.report import report_html
 
     folder = Path(folder)
-    if not folder.is_dir():
-        raise ReassembleError(f"{folder}: no such run folder ({VIEW_HINT.format(folder=folder)})")
-    if not (folder / "transforms.json").is_file():
-        raise ReassembleError(f"{folder}: no transforms.json here ({VIEW_HINT.format(folder=folder)})")
-    poses = read_transforms(folder / "transforms.json")
-    report = read_json(folder / "report.json", what="the run's report.json")
-    analysis_path = folder / "analysis.npz"
-    if not analysis_path.is_file():
-        raise ReassembleError(f"{analysis_path}: missing (made by `reassemble run` since 0.1; run it again)")
-    try:
-        with np.load(analysis_path, allow_pickle=False) as z:
-            analysis = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as exc:
-        raise ReassembleError(f"{analysis_path}: cannot read ({exc})") from None
-    glb_path = folder / "assembled.glb"
-    scene = read_glb(glb_path)
-    names = [str(n) for n in analysis["names"]]
-    missing = [n for n in names if n not in scene or n not in poses]
-    if missing:
-        raise ReassembleError(f"{folder}: fragment {missing[0]!r} is in analysis.npz but not in assembled.glb "
-                              "or transforms.json (files of different runs?)")
-    meshes = [scene[n][:2] for n in names]
-    for k, (n, (_, f)) in enumerate(zip(names, meshes)):
-        if len(analysis[f"fracture_{k}"]) != len(f):
-            raise ReassembleError(f"{glb_path}: {n!r} has {len(f)} faces, analysis.npz {len(analysis[f'fracture_{k}'])}"
-                                  " (files of different runs?)")
-    relative = analysis["radii_relative"]
-    r_index = len(relative) // 2
-    if radius is not None:
-        close = np.flatnonzero(np.isclose(relative, radius, rtol=1e-6))
-        if len(close) == 0:
-            raise ReassembleError(f"--radius {radius:g}: not one of this run's descriptor radii "
-                                  f"({', '.join(f'{r:g}' for r in relative)}, fractions of the reference size)")
-        r_index = int(close[0])
+    poses, report, analysis, names, meshes = _read_run(folder)
+    r_index = _radius_index(analysis["radii_relative"], radius)
     if truth is not None:
         metrics = evaluate_files(folder / "transforms.json", truth)
     elif (folder / "score.json").is_file():
@@ -116,6 +84,52 @@ def view_folder(
 
         show_interactive(posed_shapes(meshes, T_world, colors=colors), title=f"reassemble: {folder.name}")
     return {"pictures": len(pictures), "report": str(folder / "report.html"), "skipped": problem}
+
+
+def _read_run(folder: Path):
+    """(poses, report, analysis arrays, names, meshes) of a run folder; a one-line error for a
+    missing or inconsistent file."""
+    from .files import read_glb
+
+    if not folder.is_dir():
+        raise ReassembleError(f"{folder}: no such run folder ({VIEW_HINT.format(folder=folder)})")
+    if not (folder / "transforms.json").is_file():
+        raise ReassembleError(f"{folder}: no transforms.json here ({VIEW_HINT.format(folder=folder)})")
+    poses = read_transforms(folder / "transforms.json")
+    report = read_json(folder / "report.json", what="the run's report.json")
+    analysis_path = folder / "analysis.npz"
+    if not analysis_path.is_file():
+        raise ReassembleError(f"{analysis_path}: missing (made by `reassemble run` since 0.1; run it again)")
+    try:
+        with np.load(analysis_path, allow_pickle=False) as z:
+            analysis = {k: z[k] for k in z.files}
+    except (OSError, ValueError) as exc:
+        raise ReassembleError(f"{analysis_path}: cannot read ({exc})") from None
+    glb_path = folder / "assembled.glb"
+    scene = read_glb(glb_path)
+    names = [str(n) for n in analysis["names"]]
+    missing = [n for n in names if n not in scene or n not in poses]
+    if missing:
+        raise ReassembleError(f"{folder}: fragment {missing[0]!r} is in analysis.npz but not in assembled.glb "
+                              "or transforms.json (files of different runs?)")
+    meshes = [scene[n][:2] for n in names]
+    for k, (n, (_, f)) in enumerate(zip(names, meshes)):
+        if len(analysis[f"fracture_{k}"]) != len(f):
+            raise ReassembleError(f"{glb_path}: {n!r} has {len(f)} faces, analysis.npz {len(analysis[f'fracture_{k}'])}"
+                                  " (files of different runs?)")
+    return poses, report, analysis, names, meshes
+
+
+def _radius_index(relative: np.ndarray, radius: float | None) -> int:
+    """Index of the descriptor radius ``radius`` (a fraction of the reference size) among the run's; None: the middle one."""
+    r_index = len(relative) // 2
+    if radius is not None:
+        close = np.flatnonzero(np.isclose(relative, radius, rtol=1e-6))
+        if len(close) == 0:
+            raise ReassembleError(f"--radius {radius:g}: not one of this run's descriptor radii "
+                                  f"({', '.join(f'{r:g}' for r in relative)}, fractions of the reference size)")
+        r_index = int(close[0])
+    return r_index
 
 
 def _render_pictures(meshes, T_world, *, placed, colors, analysis, names, r_index, width, height, progress):

@@ -13,7 +13,8 @@ on them; where the CLI has ``--config``, also ``run --config OUT/config.json`` i
 ``NAME_rerun``, whose ``transforms.json`` must equal the run's. Every command's printed
 output is kept too (``NAME.stdout``).
 
-``compare`` checks every file of either folder: byte-identical, or, for the files that carry
+``compare`` checks every file of either folder (but those named by ``--expect-changed``):
+byte-identical, or, for the files that carry
 timings (``report.json``'s ``timings_s``, ``report.html``, printed seconds), identical once the
 timings are masked (said so per file); in ``report.html`` also the random name trimesh gives the
 3D view's camera. Exit status 1 when anything differs.
@@ -92,7 +93,7 @@ def _masked(path: Path, data: bytes, root: Path) -> bytes | None:
     return None
 
 
-def compare(ref: Path, new: Path) -> int:
+def compare(ref: Path, new: Path, *, expect_changed: tuple[str, ...] = ()) -> int:
     files = sorted({p.relative_to(ref) for p in ref.rglob("*") if p.is_file()}
                    | {p.relative_to(new) for p in new.rglob("*") if p.is_file()})
     bad = 0
@@ -111,6 +112,9 @@ def compare(ref: Path, new: Path) -> int:
         ma, mb = _masked(rel, da, ref), _masked(rel, db, new)
         if ma is not None and ma == mb:
             print(f"same     {rel}  (timings masked)")
+            continue
+        if rel.name in expect_changed:
+            print(f"changed  {rel}  (expected: --expect-changed {rel.name})")
             continue
         print(f"DIFFERS  {rel}")
         bad += 1
@@ -131,11 +135,13 @@ def main() -> int:
     p = sub.add_parser("compare")
     p.add_argument("ref", type=Path)
     p.add_argument("new", type=Path)
+    p.add_argument("--expect-changed", action="append", default=[], metavar="FILE_NAME",
+                   help="files of this name may differ (a format changed on purpose), e.g. config.json")
     args = parser.parse_args()
     if args.command == "generate":
         generate(args.out)
         return 0
-    return compare(args.ref, args.new)
+    return compare(args.ref, args.new, expect_changed=tuple(args.expect_changed))
 
 
 if __name__ == "__main__":

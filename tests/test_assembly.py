@@ -56,7 +56,7 @@ def test_run_outputs(run_dir, puzzle_dir):
     for c in report["contacts"]:
         assert c["penetration_area"] <= 0.02 * c["contact_area"] + 1e-12
     config = json.loads((run_dir / "config.json").read_text())
-    assert {"match", "segmentation", "registration", "assembly", "reference_size"} <= set(config)
+    assert {"describe", "segment", "features", "registration", "assembly", "reference_size"} <= set(config)
 
 
 def test_run_recovers_a_moved_fragment(run_dir, puzzle_dir, tmp_path, rng):

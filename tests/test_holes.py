@@ -10,7 +10,7 @@ from data_synth.scans import punch_holes
 from reassemble.errors import ReassembleError
 from reassemble.holes import boundary_loops, fill_holes
 from reassemble.files import load_mesh, write_ply
-from reassemble.pipeline import MatchConfig, evaluate_files, read_puzzle, run_to_folder
+from reassemble.pipeline import Config, evaluate_files, read_puzzle, run_to_folder
 
 
 def _capped_sphere(height: float):
@@ -89,7 +89,7 @@ def test_open_scanned_fragments_are_reassembled(puzzle_dir, tmp_path):
     with pytest.raises(ReassembleError, match="at least two readable fragments"):
         run_to_folder([scans], tmp_path / "refused", seed=0)
     assert not (tmp_path / "refused").exists()
-    report = run_to_folder([scans], tmp_path / "out", seed=0, config=MatchConfig(fill_holes=0.25))
+    report = run_to_folder([scans], tmp_path / "out", seed=0, config=Config(fill_holes=0.25))
     assert sum("closed 1 hole(s)" in w for w in report["warnings"]) == len(puzzle.meshes)
     scores = evaluate_files(tmp_path / "out" / "transforms.json", puzzle_dir / "ground_truth.json")
     assert scores["alignments"]["anchor_largest"]["summary"]["solved"]

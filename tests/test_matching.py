@@ -6,7 +6,8 @@ import pytest
 from reassemble.features import mate_signature, signature
 from reassemble.geometry import face_areas, invert_transform, make_transform, random_rotation, rotation_angle_deg
 from reassemble.errors import ReassembleError
-from reassemble.pipeline import MatchConfig, break_to_folder, match_pairs, prepare_fragments, read_puzzle
+from reassemble.config import with_setting
+from reassemble.pipeline import Config, break_to_folder, match_pairs, prepare_fragments, read_puzzle
 from reassemble.registration import kabsch
 from reassemble.geometry import face_adjacency
 from reassemble import segmentation as seg
@@ -187,7 +188,7 @@ def test_signature_from_the_finest_radii(prepared):
     np.testing.assert_array_equal(signature(d, radii=m), full)
     np.testing.assert_array_equal(signature(d, radii=1), full[:, [0, m]])
     with pytest.raises(ReassembleError, match="signature_radii"):
-        prepare_fragments({f.name: (f.vertices, f.faces) for f in frags}, config=MatchConfig(signature_radii=4))
+        prepare_fragments({f.name: (f.vertices, f.faces) for f in frags}, config=with_setting(Config(), "features.signature_radii=4"))
 
 
 def _mixture(means, sds, weights):

@@ -38,7 +38,7 @@ def test_thin_walls_are_told_from_solids(bowl, puzzle):
 def test_sherds_are_reassembled(bowl, tmp_path):
     report = run_to_folder([bowl / "fragments"], tmp_path / "out", seed=0)
     assert report["summary"]["thin_walled"]
-    assert json.loads((tmp_path / "out" / "config.json").read_text())["match"]["thin_walls"] is True
+    assert json.loads((tmp_path / "out" / "config.json").read_text())["thin_walls"] is True
     s = _score(tmp_path / "out", bowl)
     assert s["solved"], s
     assert s["rot_geodesic_rmse_deg"] < 1.0
@@ -68,9 +68,9 @@ def test_one_keypoint_pair_recovers_a_known_motion(bowl, rng):
 
 def test_thin_walls_can_be_turned_off(bowl):
     """--thin-walls no: the same sherds go down the solids' path (no strip frames)."""
-    from reassemble.pipeline import MatchConfig
+    from reassemble.pipeline import Config
 
     puzzle = read_puzzle(bowl / "ground_truth.json", with_labels=False)
     frags, _ = prepare_fragments({n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()},
-                                 config=MatchConfig(thin_walls=False), seed=0)
+                                 config=Config(thin_walls=False), seed=0)
     assert not any(f.shell for f in frags) and all(f.surface.keypoint_tangents is None for f in frags)

@@ -23,6 +23,7 @@ from .assembly import AssemblyParams
 from .descriptors import DescriptorParams
 from .errors import ReassembleError
 from .features import FeatureParams
+from .files import read_json
 from .registration import RegistrationParams
 from .segmentation import SegmentParams
 from .synth import BreakParams
@@ -182,8 +183,6 @@ def from_dict(data: dict, *, source: str = "config", cls=Config, prefix: str = "
 
 def read_config(path: str | Path) -> Config:
     """The config of a ``config.json`` (written by a run, or by hand: what it leaves out keeps its default)."""
-    from .files import read_json
-
     config = from_dict(read_json(path, what="a config.json written by 'reassemble run'"), source=str(path))
     config.check()
     return config

@@ -7,6 +7,7 @@ from pathlib import Path
 from .files import check_output_folder, write_json
 from .pipeline import run_to_folder
 from .puzzle import break_to_folder, evaluate_files
+from .synth import BreakParams
 
 
 def demo_to_folder(
@@ -17,8 +18,6 @@ def demo_to_folder(
 
     Returns the run's report and the score (also written to ``out/result/score.json``).
     """
-    from .synth import BreakParams
-
     out = Path(out)
     check_output_folder(out, force=force)
     puzzle = break_to_folder(mesh, out / "puzzle", params=BreakParams(pieces=pieces), seed=seed, force=True)

@@ -24,7 +24,9 @@ from .files import (
     write_ply,
 )
 from .geometry import canonical_order, face_areas
+from .metrics import ScoringFragment, evaluate
 from .outputs import rounded
+from .synth import break_mesh
 
 log = logging.getLogger(__name__)
 
@@ -41,8 +43,6 @@ def break_to_folder(
     one array per fragment name) and ``out/ground_truth.json``. The folder appears only
     when complete.
     """
-    from .synth import break_mesh
-
     path = resolve_mesh_path(mesh)
     params.check()
     data = load_mesh(path, require_closed=True, fill_holes=fill_holes)
@@ -133,8 +133,6 @@ def evaluate_files(
     predicted: str | Path, ground_truth: str | Path, *, n_points: int = 1000, seed: int = 0
 ) -> dict:
     """Score ``predicted`` (a transforms.json) against a puzzle's ``ground_truth.json``."""
-    from .metrics import ScoringFragment, evaluate
-
     pred = read_transforms(predicted)
     truth = read_transforms(ground_truth)
     puzzle = read_puzzle(ground_truth, with_labels=False)

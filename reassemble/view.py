@@ -6,9 +6,11 @@ import logging
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from .errors import ReassembleError
-from .files import read_json, read_transforms, staged_directory
+from .files import glb_bytes, png_bytes, read_glb, read_json, read_transforms, staged_directory, write_bytes, write_text
+from .geometry import decimate
 from .puzzle import evaluate_files
 from .viz.colors import fragment_colors
 
@@ -39,8 +41,6 @@ def view_folder(
 
     Returns a summary: pictures written, the page's path, why pictures were skipped.
     """
-    from .geometry import decimate
-    from .files import glb_bytes, write_bytes, write_text
     from .viz.report import report_html
 
     folder = Path(folder)
@@ -89,8 +89,6 @@ def view_folder(
 def _read_run(folder: Path):
     """(poses, report, analysis arrays, names, meshes) of a run folder; a one-line error for a
     missing or inconsistent file."""
-    from .files import read_glb
-
     if not folder.is_dir():
         raise ReassembleError(f"{folder}: no such run folder ({VIEW_HINT.format(folder=folder)})")
     if not (folder / "transforms.json").is_file():
@@ -134,9 +132,6 @@ def _radius_index(relative: np.ndarray, radius: float | None) -> int:
 
 def _render_pictures(meshes, T_world, *, placed, colors, analysis, names, r_index, width, height, progress):
     """(PNG bytes per picture key, None) or ({}, why no picture can be made)."""
-    from tqdm import tqdm
-
-    from .files import png_bytes
     from .viz.pictures import assembly_pictures, fragment_picture, match_picture
     from .viz.render import Renderer, RenderUnavailable, gl_problem
 

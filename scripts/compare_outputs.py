@@ -111,7 +111,7 @@ def compare(ref: Path, new: Path, *, expect_changed: tuple[str, ...] = ()) -> in
             continue
         ma, mb = _masked(rel, da, ref), _masked(rel, db, new)
         if ma is not None and ma == mb:
-            print(f"same     {rel}  (timings masked)")
+            print(f"same     {rel}  (timings, folder and camera names masked)")
             continue
         if rel.name in expect_changed:
             print(f"changed  {rel}  (expected: --expect-changed {rel.name})")

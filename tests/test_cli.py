@@ -144,6 +144,7 @@ def test_describe_bad_input(tmp_path):
     assert not (tmp_path / "o.npz").exists()
 
 
+@pytest.mark.slow
 def test_match_writes_pairs_and_debug_files(puzzle_dir, tmp_path):
     frag_dir = puzzle_dir / "fragments"
     before = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in frag_dir.iterdir()}
@@ -187,6 +188,7 @@ def test_folder_commands_bad_input(tmp_path, command):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_run_and_demo(puzzle_dir, tmp_path):
     rc, out, err = run("run", puzzle_dir / "fragments", "--out", tmp_path / "r", "--quiet", "--jobs", 1)
     assert rc == 0, err

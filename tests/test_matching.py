@@ -77,7 +77,7 @@ def test_mate_signature_flips_mean_curvature_only():
 
 
 def test_pairs_registered_and_ranked(puzzle, prepared):
-    # contacts of >= 10 % of the smaller surface here; the 5 % figure is benchmarks/pairwise.py's
+    # contacts of >= 10 % of the smaller surface here; the 5 % figure is benchmarks.accuracy.pairwise's
     frags, size = prepared
     gt = puzzle.ground_truth
     T_world = {n: np.asarray(v["transform"]) for n, v in gt["fragments"].items()}

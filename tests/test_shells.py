@@ -35,6 +35,7 @@ def test_thin_walls_are_told_from_solids(bowl, puzzle):
         assert not is_thin_shell(m.vertices, m.faces, wall_thickness(m.vertices, m.faces))
 
 
+@pytest.mark.slow
 def test_sherds_are_reassembled(bowl, tmp_path):
     report = run_to_folder([bowl / "fragments"], tmp_path / "out", seed=0)
     assert report["summary"]["thin_walled"]

@@ -144,6 +144,7 @@ def test_interrupted_run_leaves_nothing(puzzle_dir, tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_refine_recovers_perturbed_poses(puzzle):
     meshes = {n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}
     frags, size = prepare_fragments(meshes, seed=0)
@@ -254,6 +255,7 @@ def test_no_gap_is_found_where_there_is_none(run_dir):
     assert json.loads((run_dir / "config.json").read_text())["registration"]["gap"] == 0.0
 
 
+@pytest.mark.slow
 def test_estimate_gap_recovers_a_known_separation(puzzle, rng):
     """Two mating fragments moved a known distance apart along their contact, and started
     touching (as plain ICP leaves them): the separation and the pose are recovered."""

@@ -129,7 +129,8 @@ class Run:
         tmp = path.with_name(path.name + ".tmp")
         tmp.write_text(json.dumps(record, indent=1, default=_plain, allow_nan=True) + "\n")
         tmp.replace(path)
-        print(f"results: {os.path.relpath(path)}")
+        shown = os.path.relpath(path) if path.resolve().is_relative_to(Path.cwd()) else path
+        print(f"results: {shown}")
         return path
 
 

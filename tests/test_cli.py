@@ -28,6 +28,7 @@ def assert_one_line_error(rc, err, *words):
         assert w in err, err
 
 
+@pytest.mark.slow
 def test_break_then_eval(tmp_path):
     rc, out, err = run("break", "torus", "--pieces", 3, "--seed", 2, "--out", tmp_path / "p")
     assert rc == 0, err
@@ -112,6 +113,7 @@ def test_eval_bad_input(tmp_path, puzzle_dir):
     assert_one_line_error(rc, err, "fragment_00", "rigid")
 
 
+@pytest.mark.slow
 def test_describe_writes_the_documented_arrays(tmp_path):
     out = tmp_path / "torus.npz"
     rc, stdout, err = run("describe", "torus", "--radii", "0.05,0.1", "--relative", "--out", out)

@@ -114,6 +114,9 @@ def results_md(benches: list[dict], recs: dict[str, list[dict]]) -> str:
                 continue
             for rec in have:
                 lines += provenance(rec)
+                missed = rec.get("figures", {}).get("missed") if isinstance(rec.get("figures"), dict) else None
+                if missed:
+                    lines += ["Targets missed in this run:", ""] + [f"- {m}" for m in missed] + [""]
                 for t in rec.get("tables", []):
                     lines += markdown_table(t)
     unknown = sorted(set(recs) - {b["name"] for b in benches})

@@ -196,7 +196,8 @@ def main() -> int:
                 x["t_prepare_per_fragment"], x["t_per_pair"]] for x in per_puzzle],
               ["", "d", ".3f", "d", "d", ".3f", ".2f", ".2f"]),
     ]
-    headline = [(f"Pairs right ({x['group']}, {x['touching']} touching pairs of {x['puzzles']} bench puzzles)",
+    headline = [(f"Pairs right ({x['group']}, {x['touching']} touching pairs of {x['puzzles']} {args.set} puzzles of "
+                  f"{args.pieces} pieces)",
                  f"{x['ours_share']:.3f} (target >= 0.95)"
                  + (f"; ROC AUC {x['ours_auc']:.3f} (target >= 0.98)" if np.isfinite(x["ours_auc"]) else ""))
                 for x in summary if x["group"] != "all" and x["ours_share"] is not None]

@@ -45,6 +45,7 @@ def test_sherds_are_reassembled(bowl, tmp_path):
     assert s["rot_geodesic_rmse_deg"] < 1.0
 
 
+@pytest.mark.slow
 def test_one_keypoint_pair_recovers_a_known_motion(bowl, rng):
     """Two mating sherds, the source moved by a seeded rigid motion: the frame hypotheses
     and ICP find it back (top candidate within 1 degree and 0.5 % of the size)."""

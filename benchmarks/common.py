@@ -1,13 +1,32 @@
-"""What every benchmark prints first: the machine and the command, so figures can be rerun."""
+"""What every benchmark shares: its provenance (machine, command, commit) and its JSON record.
+
+A benchmark calls :func:`start` first, which prints the machine and the exact command, and
+ends with :meth:`Run.write`, which writes ``benchmarks/results/<name>.json`` (or ``--json
+PATH``): the provenance, the date, the figures and the tables ``python -m benchmarks.report``
+turns into ``docs/results.md``. No figure is copied by hand.
+"""
 
 from __future__ import annotations
 
+import datetime
+import json
 import os
 import platform
+import shlex
+import subprocess
 import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+PACKAGES = ("numpy", "scipy", "scikit-learn", "trimesh", "manifold3d", "open3d-cpu", "open3d", "pillow")
 
 
-def machine_line() -> str:
+def machine() -> dict:
+    """CPU model, cores, RAM, OS, Python and the versions of the key packages."""
+    from importlib import metadata
+
     cpu = platform.processor() or platform.machine()
     try:
         with open("/proc/cpuinfo") as f:
@@ -19,15 +38,130 @@ def machine_line() -> str:
         pass
     try:
         mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
-    except (ValueError, OSError):
-        mem = float("nan")
-    return (f"machine: {cpu}, {os.cpu_count()} cores, {mem:.0f} GiB; "
-            f"Python {platform.python_version()} on {platform.system()} {platform.machine()}")
+    except (ValueError, OSError, AttributeError):
+        mem = None
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:
+        usable = os.cpu_count()
+    versions = {}
+    for name in PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "usable_cores": usable,
+            "ram_gib": None if mem is None else round(mem, 1),
+            "os": platform.platform(), "python": platform.python_version(), "packages": versions}
 
 
-def header() -> None:
-    print(machine_line())
-    print("command: " + " ".join([os.path.relpath(sys.argv[0])] + sys.argv[1:]))
+def machine_line(m: dict | None = None) -> str:
+    m = machine() if m is None else m
+    mem = "?" if m["ram_gib"] is None else f"{m['ram_gib']:.0f}"
+    return f"machine: {m['cpu']}, {m['cores']} cores, {mem} GiB; Python {m['python']} on {m['os']}"
+
+
+def git_state() -> dict:
+    """The commit of the working tree and whether tracked files differ from it."""
+    def git(*args):
+        return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True,
+                              check=True).stdout.strip()
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+    except (OSError, subprocess.CalledProcessError):
+        return {"commit": None, "dirty": None}
+    return {"commit": commit, "dirty": dirty}
+
+
+def benchmark_name() -> str:
+    """``accuracy.segmentation`` for ``python -m benchmarks.accuracy.segmentation``."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    if spec is not None and spec.name.startswith("benchmarks."):
+        return spec.name[len("benchmarks."):]
+    path = Path(sys.argv[0]).resolve()
+    try:
+        return ".".join(path.relative_to(ROOT / "benchmarks").with_suffix("").parts)
+    except ValueError:
+        return path.stem
+
+
+def command_line() -> str:
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    prog = f"python -m {spec.name}" if spec is not None else f"python {os.path.relpath(sys.argv[0])}"
+    return " ".join([prog] + [shlex.quote(a) for a in sys.argv[1:]])
+
+
+def add_json_option(parser) -> None:
+    parser.add_argument("--json", type=Path, default=None, metavar="PATH",
+                        help="write the results here (default benchmarks/results/<name>.json)")
+
+
+def table(title: str, columns: list[str], rows: list[list], formats: list[str] | None = None) -> dict:
+    """A table for ``docs/results.md``: raw values, and a format spec per column ('' = str)."""
+    return {"title": title, "columns": list(columns), "rows": [list(r) for r in rows],
+            "formats": list(formats) if formats is not None else [""] * len(columns)}
+
+
+class Run:
+    """One run of a benchmark: its provenance, captured at the start, and its JSON record."""
+
+    def __init__(self):
+        self.name = benchmark_name()
+        self.command = command_line()
+        self.machine = machine()
+        self.git = git_state()
+        self.started = datetime.datetime.now(datetime.timezone.utc)
+        self.t0 = time.perf_counter()
+        self.load_start = _load()
+
+    def write(self, path: Path | None, *, figures: dict, tables: list[dict] = (),
+              headline: list[tuple[str, str]] = ()) -> Path:
+        """Write the record (atomically) and say where; ``headline``: (what, figure) rows for the README."""
+        path = Path(path) if path is not None else RESULTS / f"{self.name}.json"
+        record = {"format": "reassemble-benchmark/1", "benchmark": self.name, "command": self.command,
+                  "commit": self.git["commit"], "dirty": self.git["dirty"],
+                  "date": self.started.strftime("%Y-%m-%dT%H:%M:%SZ"),
+                  "seconds": round(time.perf_counter() - self.t0, 1),
+                  "machine": self.machine, "load_average": [self.load_start, _load()],
+                  "headline": [list(h) for h in headline], "tables": list(tables), "figures": figures}
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(record, indent=1, default=_plain, allow_nan=True) + "\n")
+        tmp.replace(path)
+        shown = os.path.relpath(path) if path.resolve().is_relative_to(Path.cwd()) else path
+        print(f"results: {shown}")
+        return path
+
+
+def _load() -> float | None:
+    try:
+        return round(os.getloadavg()[0], 2)
+    except (OSError, AttributeError):
+        return None
+
+
+def _plain(x):
+    """numpy scalars and arrays, paths and tuples as JSON values."""
+    import numpy as np
+
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, Path):
+        return str(x)
+    raise TypeError(f"not JSON serializable: {type(x).__name__}")
+
+
+def start() -> Run:
+    """Print the machine and the command (so figures can be rerun) and start the record."""
+    run = Run()
+    print(machine_line(run.machine))
+    print("command: " + run.command)
+    commit = run.git["commit"] or "unknown"
+    print(f"commit: {commit}" + (" (tree modified)" if run.git["dirty"] else ""))
+    return run
 
 
 def add_selection(parser, *, pieces: str) -> None:
@@ -45,6 +179,7 @@ def add_selection(parser, *, pieces: str) -> None:
     parser.add_argument("--noisy-only", action="store_true")
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once")
     parser.add_argument("--seed", type=int, default=0)
+    add_json_option(parser)
 
 
 def select(args) -> list:
@@ -96,7 +231,7 @@ def described(gt_path, config, *, cache: bool = True):
     meshes = {n: (m.vertices, m.faces) for n, m in sorted(puzzle.meshes.items())}
     if not cache:
         return describe_fragments(meshes, config=config)
-    code = Path(__file__).resolve().parents[1] / "reassemble"
+    code = ROOT / "reassemble"
     key = hashlib.sha256()
     for path in sorted(code.glob("descriptors/*.py")) + [code / "geometry.py"]:
         key.update(path.read_bytes())

@@ -163,9 +163,8 @@ def vertex_noise(vertices: np.ndarray, *, neighbours: int = 16, percentile: floa
     fitted coefficients, is the noise there plus whatever the surface does beyond a quadric.
     The ``percentile``-th value over the vertices is taken, where the surface is smoothest.
     On a smooth surface with pure noise that reads 0.82 sigma (the quartile of a chi
-    distribution with 10 degrees of freedom); on the bench fragments, where the geometry
-    adds its share, 0.89-1.09 times the true sigma of the added Gaussian noise, and below
-    0.12 % of the fragment size on noise-free fragments (``benchmarks/noise_estimate.py``).
+    distribution with 10 degrees of freedom); where the geometry adds its share it reads
+    more (``python -m benchmarks.accuracy.noise_estimate`` compares it with the added noise).
     """
     from scipy.spatial import cKDTree
 

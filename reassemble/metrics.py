@@ -7,7 +7,7 @@ box (longest side 1). A fragment counts as correct when the sum of the two mean
 *squared* nearest-neighbour distances between the two placements is below 0.01.
 Rotation errors compare Euler angles (intrinsic 'zyx' from the quaternion, wrapped
 at 180 degrees) as the reference code does; translations are those of the
-fragment's point centroid. See ``docs/metrics.md`` for every definition.
+fragment's point centroid. See ``docs/method/metrics.md`` for every definition.
 """
 
 from __future__ import annotations

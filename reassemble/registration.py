@@ -16,6 +16,7 @@
    lies inside the other, from Open3D signed distances), over the smaller fragment's area.
 
 Transforms are ``T_target_source``: they map source coordinates into the target's frame.
+Why each step: ``docs/method/registration.md``.
 """
 
 from __future__ import annotations
@@ -104,8 +105,7 @@ def with_noise(params: RegistrationParams, *, noise: float, size: float) -> Regi
     Two mating surfaces that each carry vertex noise of standard deviation ``noise`` (mesh
     units) lie a gap of sigma ``sqrt(2) noise`` apart: with a tolerance below that, true
     contact goes uncounted and noise spikes count as interpenetration, which pushes mates
-    apart (measured: 1-3 % of the fragment size on the noisy 20-piece wing nut, which then
-    assembled wrong; right with the raised tolerance). Noise-free sets keep ``tolerance``.
+    apart. Noise-free sets keep ``tolerance``.
     """
     tolerance = max(params.tolerance, params.noise_tolerance * np.sqrt(2.0) * noise / size)
     return dataclasses.replace(params, tolerance=float(tolerance))
@@ -227,7 +227,7 @@ def ransac(
         return T, np.zeros(0, int)
     # consensus near the hypothesis: probes drawn around its first source keypoint. Counted
     # over the whole fragment, a true contact of 5-10 % of the fracture surface scores no
-    # better than chance overlaps of the rest (measured: every such pair lost)
+    # better than chance overlaps of the rest
     anchors = pairs[pick[idx[facing], 0], 0]
     hoods = _neighbourhoods(source.keypoints, anchors, params.probe_radius * radius)
     return _consensus(T, anchors, source, target, cKDTree(target.keypoints), hoods, tol=tol, cos_tol=cos_tol,
@@ -380,7 +380,7 @@ def icp(
     """Point-to-plane ICP of the source fracture samples onto the target's, from ``T``.
 
     Only pairs with opposed normals count (Open3D's ICP has no such test: on a small contact
-    it slid onto the neighbouring fracture faces of the other fragment, measured). Coarse
+    it slid onto the neighbouring fracture faces of the other fragment). Coarse
     to fine: distance thresholds ``levels`` times ``tol``; the first ``n_points`` samples only
     when given (the samples are in random order).
     """
@@ -412,7 +412,7 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
     """(T, gap): point-to-plane ICP; when ``max_gap`` > 0 the separation (from 0) is a 7th
     unknown, and the source is matched against the target's samples moved out by the
     current separation (nearest points across a wide gap land on the bumps of a rough
-    surface, which biased the fit: measured 0.019 instead of 0.033 x size from the truth)."""
+    surface, which biases the fit towards a smaller gap)."""
     from scipy.spatial import cKDTree
 
     tree = tree if tree is not None and max_gap == 0 else cKDTree(target.samples)
@@ -630,8 +630,8 @@ def register_pair(
                             rng=rng, plane_tol=tol if params.plane_consensus else None)
     candidates = []
     # a shortlist gets a quick coarse ICP on a thousand samples and a quick contact count;
-    # the best of those the full ICP and score (the true pose of a small contact ranked
-    # 28th-88th among the hypotheses on the fish, measured)
+    # the best of those the full ICP and score (the true pose of a small contact can rank
+    # far down the hypotheses)
     from scipy.spatial import cKDTree
 
     tree = cKDTree(target.samples)

@@ -2,13 +2,13 @@
 
 Fracture surfaces are rough across scales and meet the original surface along sharp
 edges; the original surface is smooth at small scales (or piecewise flat, for CAD parts).
-Measured on the bench set (``benchmarks/pairwise.py``), the decisive cues are:
+The cues (why each, and what it was measured against: ``docs/method/segmentation.md``):
 
 - **patches**: faces grouped by mesh connectivity without crossing a sharp edge, capped
-  in size by a coarse cell grid. Sharp edges separate the two classes almost perfectly
-  (patch purity 0.996-1.0 at 30 degrees), so patches, not faces, are classified;
+  in size by a coarse cell grid. Sharp edges separate the two classes almost perfectly,
+  so patches, not faces, are classified;
 - **roughness of a patch**: the RMS residual of a quadric fitted to its surface, over the
-  patch's size. Smooth and CAD surfaces fit (per-patch AUC 0.91-0.99);
+  patch's size. Smooth and CAD surfaces fit;
 - **integral-invariant roughness**: the angle between a face's normal and the normal of
   ball ∩ solid at the smallest radius, and ``(κ1 − κ2)² r²`` from its covariance.
 
@@ -47,12 +47,8 @@ class SegmentParams:
     patch_size : edge of the cell grid that caps patch size (fraction of the reference size)
     smoothness : weight of the graph cut's boundary term against the patch evidence
     smooth_angle : dihedral angle (degrees) at which cutting a boundary costs e^-1 of a flat one.
-        Under noise smooth surface has edges of 10-20 degrees, and at 10 cutting them was
-        nearly free (``benchmarks/segmentation.py``, F1 clean / noisy at 10, 15, 20, 30, 40:
-        0.976 / 0.943, 0.981 / 0.954, 0.983 / 0.962, 0.984 / 0.961, 0.982 / 0.961); from 20 up
-        a break met at a shallow angle costs too much to cut out, and the cut erased one
-        fragment's break on the low-resolution torus in 5 pieces (tests/test_assembly.py,
-        test_missing_fragment_others_still_right)
+        Low enough that the edges of noisy smooth surface (10-20 degrees) are not free to
+        cut, high enough that a break met at a shallow angle can still be cut out
     samples : surface samples per fragment for the quadric fits
     min_samples : patches with fewer samples (expected) are too small for a quadric fit:
         they join a neighbour (``merge_angle``), or carry no evidence
@@ -62,8 +58,11 @@ class SegmentParams:
         the labelled fracture still covers less than ``min_fracture_share`` of the set
     merge_angle : a patch too small for a quadric fit joins the neighbour across its
         flattest boundary when that boundary's mean dihedral angle is under this (degrees;
-        0: never). Crease angle 30 -> 45 -> 60 degrees: noisy bench F1 0.918 / 0.943 / 0.944
-        (``benchmarks/segmentation.py``)
+        0: never), so a real crease stays a boundary
+
+    Notes
+    -----
+    The defaults and what each was chosen against: ``docs/method/segmentation.md``.
     """
 
     crease_angle: float = 30.0
@@ -244,10 +243,9 @@ def segment(
     out = _segment(meshes, descriptors, size=size, params=params, seed=seed, smoothing=0)
     if _share(out) < params.min_fracture_share and params.noise_smoothing:
         # Under scan noise the crease angles and face normals are noise: patches shatter and
-        # the roughness of the break drowns (noisy cow in 12 pieces: 8 % labelled, 55 % true,
-        # F1 0.17). Their geometry is then taken from a Taubin-smoothed copy; the integral
-        # invariants, being integrals, stay (F1 0.86). Only as a retry: where the first pass
-        # finds a break, smoothing costs more than it gives (noisy wing nut 8 pieces: 0.84 -> 0.59).
+        # the roughness of the break drowns. Their geometry is then taken from a Taubin-smoothed
+        # copy; the integral invariants, being integrals, stay. Only as a retry: where the first
+        # pass finds a break, smoothing costs more than it gives (docs/method/segmentation.md).
         retry = _segment(meshes, descriptors, size=size, params=params, seed=seed, smoothing=params.noise_smoothing)
         if _share(retry) > _share(out):
             out = retry
@@ -314,7 +312,7 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
     fits = [GaussianMixture(k, random_state=state).fit(pooled[pick, None]) for k in (2, 3)]
     # two or three components by BIC: where the original surface is itself two kinds (thin
     # curved parts and broad faces: wingnut, CAD), two components split those, not fracture
-    # from original (2 pieces: F1 0.58 -> 0.999 on wingnut)
+    # from original
     fits.sort(key=lambda g: g.bic(pooled[pick, None]))
     fracture_components = functools.partial(_fracture_components, scores=pooled[informative],
                                             weights=weights[informative], min_share=params.min_fracture_share)
@@ -398,13 +396,11 @@ def _fracture_components(gmm, scores: np.ndarray, weights: np.ndarray, *, min_sh
     if len(order) == 3 and means[order[2]] - means[order[1]] < MERGE_SDS * min(sds[order[2]], sds[order[1]]):
         # the middle component overlaps the roughest: one kind of fracture split in two.
         # Judged by nearness of the means alone, noisy original surface spread over two
-        # components joined the break (noisy angle block 4 pieces, 2026-12-01 set: F1 0.70 -> 0.97);
-        # within the wider of the two sds, a broad roughest component swallowed a narrow
-        # middle one of original surface (noisy cow 2 pieces with merged shards: F1 0.41)
+        # components joined the break; within the wider of the two sds, a broad roughest
+        # component swallowed a narrow middle one of original surface
         rough.append(int(order[1]))
     # when the roughest component holds a tiny share of the area it is the rims and spikes
-    # of a noisy surface and the fracture lies in the next one (noisy cow, 4 pieces: 4-5 %
-    # labelled on every fragment, 7-52 % true)
+    # of a noisy surface and the fracture lies in the next one
     while True:
         share = float(np.average(gmm.predict_proba(scores[:, None])[:, rough].sum(axis=1) > 0.5, weights=weights))
         if share >= min_share or len(rough) == len(order) - 1:

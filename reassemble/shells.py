@@ -3,9 +3,9 @@
 A sherd is two smooth walls (outside and inside of the vessel) joined along its outline by
 a break strip about one wall thickness wide. Its break is a band, not a surface: the
 integral-invariant signatures at radii larger than the wall see the walls, not the break,
-and the ball normals of mates there are 36-68 degrees from opposed (the strip frames
-below: 8-26; vessel set, ``benchmarks/vessel.py --diagnose``). Sherds are matched along
-their strips instead:
+and the ball normals of mates there are far from opposed (the strip frames below are much
+closer; ``python -m benchmarks.accuracy.vessel --diagnose``). Sherds are matched along
+their strips instead (``docs/method/thin_walls.md``):
 
 - the strip is what is not wall: a ray cast inward from a wall face meets the opposite wall
   (an antiparallel face) within about one thickness; from a strip face it runs along the
@@ -59,10 +59,8 @@ def walls(thickness: np.ndarray) -> tuple[np.ndarray, float]:
 
 def is_thin_shell(vertices: np.ndarray, faces: np.ndarray, thickness: np.ndarray) -> bool:
     """Whether a fragment is a thin-walled sherd: walls are most of its surface and thin
-    against its size. Over the bench solids' fragments the median wall (the far side of a
-    solid) is at least 0.125 of the diagonal (median over a puzzle), no fragment passes;
-    the vessel set's 0.032-0.050, the vase's 0.016-0.028 (``benchmarks/thin_walls.py``,
-    ``benchmarks/vessel.py --diagnose``)."""
+    against its size. A solid's "wall" is its far side, well above the threshold
+    (``python -m benchmarks.accuracy.thin_walls`` measures both over a puzzle set)."""
     wall, median = walls(thickness)
     area = face_areas(vertices, faces)
     diag = float(np.linalg.norm(np.ptp(vertices, axis=0)))

@@ -23,6 +23,7 @@ def _score(run_dir, puzzle_dir) -> dict:
 
 
 @pytest.mark.parametrize("spec", smoke_set(), ids=lambda s: s.name)
+@pytest.mark.slow
 def test_run_solves_smoke_set(spec, tmp_path):
     puzzle = tmp_path / "puzzle"
     break_to_folder(spec.mesh, puzzle, params=BreakParams(pieces=spec.pieces), seed=spec.seed)
@@ -32,6 +33,7 @@ def test_run_solves_smoke_set(spec, tmp_path):
     assert s["rot_geodesic_rmse_deg"] < 0.5
 
 
+@pytest.mark.slow
 def test_run_outputs(run_dir, puzzle_dir):
     import trimesh
 
@@ -59,6 +61,7 @@ def test_run_outputs(run_dir, puzzle_dir):
     assert {"describe", "segment", "features", "registration", "assembly", "reference_size"} <= set(config)
 
 
+@pytest.mark.slow
 def test_run_recovers_a_moved_fragment(run_dir, puzzle_dir, tmp_path, rng):
     """Moving one input file by a known rigid motion moves its result by exactly the inverse."""
     import trimesh
@@ -83,6 +86,7 @@ def test_run_recovers_a_moved_fragment(run_dir, puzzle_dir, tmp_path, rng):
     assert np.linalg.norm(after[name]["transform"][:3, 3] - expected[:3, 3]) < 2e-3 * diag
 
 
+@pytest.mark.slow
 def test_stray_fragment_is_not_placed(puzzle_dir, tmp_path):
     stray_puzzle = tmp_path / "torus"
     break_to_folder("torus", stray_puzzle, params=BreakParams(pieces=3), seed=4)
@@ -104,6 +108,7 @@ def test_stray_fragment_is_not_placed(puzzle_dir, tmp_path):
     assert s["summary"]["solved"]
 
 
+@pytest.mark.slow
 def test_run_is_deterministic_and_independent_of_jobs(run_dir, puzzle_dir, tmp_path):
     run_to_folder([puzzle_dir / "fragments"], tmp_path / "out", seed=0, jobs=2)
     a, b = tree_digest(run_dir), tree_digest(tmp_path / "out")
@@ -118,6 +123,7 @@ def test_run_is_deterministic_and_independent_of_jobs(run_dir, puzzle_dir, tmp_p
             assert a[k] == b[k], k
 
 
+@pytest.mark.slow
 def test_run_refuses_existing_output_and_keeps_inputs(run_dir, puzzle_dir):
     before = tree_digest(puzzle_dir)
     with pytest.raises(ReassembleError, match="exists"):
@@ -125,6 +131,7 @@ def test_run_refuses_existing_output_and_keeps_inputs(run_dir, puzzle_dir):
     assert tree_digest(puzzle_dir) == before
 
 
+@pytest.mark.slow
 def test_interrupted_run_leaves_nothing(puzzle_dir, tmp_path, monkeypatch):
     import reassemble.assembly
 
@@ -137,6 +144,7 @@ def test_interrupted_run_leaves_nothing(puzzle_dir, tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_refine_recovers_perturbed_poses(puzzle):
     meshes = {n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}
     frags, size = prepare_fragments(meshes, seed=0)
@@ -181,6 +189,7 @@ def test_world_poses_put_unplaced_groups_apart():
     assert boxes[3][:, 0].min() >= boxes[2][:, 0].max() + 0.1 - 1e-9
 
 
+@pytest.mark.slow
 def test_missing_fragment_others_still_right(tmp_path):
     puzzle = tmp_path / "puzzle"
     break_to_folder("torus", puzzle, params=BreakParams(pieces=5), seed=2)
@@ -202,6 +211,7 @@ def test_missing_fragment_others_still_right(tmp_path):
         assert np.linalg.norm(got[:3, 3] - want[:3, 3]) < 0.005 * diag
 
 
+@pytest.mark.slow
 def test_units_do_not_matter(run_dir, puzzle_dir, tmp_path):
     """The same fragments in millimetres instead of metres: the same result, up to scale."""
     import trimesh
@@ -223,6 +233,7 @@ def test_units_do_not_matter(run_dir, puzzle_dir, tmp_path):
         assert abs(m["confidence"] - mm["confidence"]) < 0.02
 
 
+@pytest.mark.slow
 def test_gap_between_pieces_is_measured_and_kept(tmp_path):
     """Material lost at the break (mates 1.5 % of the diagonal apart): the gap is measured,
     every piece placed where it was, the gap kept (closing it would shift the pieces)."""
@@ -238,11 +249,13 @@ def test_gap_between_pieces_is_measured_and_kept(tmp_path):
     assert s["rot_geodesic_rmse_deg"] < 1.0
 
 
+@pytest.mark.slow
 def test_no_gap_is_found_where_there_is_none(run_dir):
     assert json.loads((run_dir / "report.json").read_text())["summary"]["gap"] == 0.0
     assert json.loads((run_dir / "config.json").read_text())["registration"]["gap"] == 0.0
 
 
+@pytest.mark.slow
 def test_estimate_gap_recovers_a_known_separation(puzzle, rng):
     """Two mating fragments moved a known distance apart along their contact, and started
     touching (as plain ICP leaves them): the separation and the pose are recovered."""
@@ -277,6 +290,7 @@ def test_estimate_gap_recovers_a_known_separation(puzzle, rng):
     assert np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]) < 0.005 * size
 
 
+@pytest.mark.slow
 def test_heavy_noise_is_matched_on_smoothed_copies(tmp_path):
     """Vertex noise of 0.5 % of the diagonal: matched on smoothed copies, all placed right,
     and the outputs keep the given (noisy) geometry."""
@@ -298,6 +312,7 @@ def test_heavy_noise_is_matched_on_smoothed_copies(tmp_path):
     assert np.abs(placed.vertices[: len(moved)] - moved).max() < 1e-5 * np.ptp(moved)  # the given vertices
 
 
+@pytest.mark.slow
 def test_clean_sets_are_not_smoothed(run_dir):
     report = json.loads((run_dir / "report.json").read_text())
     assert all(f["smoothing_iterations"] == 0 for f in report["fragments"].values())

@@ -57,6 +57,7 @@ def mixed(puzzle_dir, tmp_path_factory):
     return folder, root / "out", before, rc, out, err
 
 
+@pytest.mark.slow
 def test_mixed_folder_is_handled_as_documented(mixed):
     folder, out, before, rc, stdout, err = mixed
     assert rc == 0, err
@@ -97,6 +98,7 @@ def test_unwritable_output(puzzle_dir, tmp_path):
     assert blocker.read_text() == "x"
 
 
+@pytest.mark.slow
 def test_killed_run_leaves_no_output_and_a_rerun_works(puzzle_dir, tmp_path):
     before = _digests(puzzle_dir / "fragments")
     out = tmp_path / "out"

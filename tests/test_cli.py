@@ -28,6 +28,7 @@ def assert_one_line_error(rc, err, *words):
         assert w in err, err
 
 
+@pytest.mark.slow
 def test_break_then_eval(tmp_path):
     rc, out, err = run("break", "torus", "--pieces", 3, "--seed", 2, "--out", tmp_path / "p")
     assert rc == 0, err
@@ -112,6 +113,7 @@ def test_eval_bad_input(tmp_path, puzzle_dir):
     assert_one_line_error(rc, err, "fragment_00", "rigid")
 
 
+@pytest.mark.slow
 def test_describe_writes_the_documented_arrays(tmp_path):
     out = tmp_path / "torus.npz"
     rc, stdout, err = run("describe", "torus", "--radii", "0.05,0.1", "--relative", "--out", out)
@@ -144,6 +146,7 @@ def test_describe_bad_input(tmp_path):
     assert not (tmp_path / "o.npz").exists()
 
 
+@pytest.mark.slow
 def test_match_writes_pairs_and_debug_files(puzzle_dir, tmp_path):
     frag_dir = puzzle_dir / "fragments"
     before = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in frag_dir.iterdir()}
@@ -187,6 +190,7 @@ def test_folder_commands_bad_input(tmp_path, command):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_run_and_demo(puzzle_dir, tmp_path):
     rc, out, err = run("run", puzzle_dir / "fragments", "--out", tmp_path / "r", "--quiet", "--jobs", 1)
     assert rc == 0, err

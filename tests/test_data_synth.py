@@ -2,11 +2,14 @@
 
 import json
 
+import pytest
+
 from data_synth.make_sets import build_set
 from data_synth.sets import BENCH_MESHES, bench_set, sherds_set, smoke_set
 from reassemble.files import bundled_meshes, load_mesh
 
 
+@pytest.mark.slow
 def test_smoke_set_builds_and_resumes(tmp_path):
     results = build_set("smoke", tmp_path)
     assert len(results) == len(smoke_set()) and not any(r["cached"] for r in results)

@@ -81,6 +81,7 @@ def test_the_loader_refuses_an_open_scan_or_closes_it(tmp_path):
     assert hashlib.sha256(path.read_bytes()).hexdigest() == before
 
 
+@pytest.mark.slow
 def test_open_scanned_fragments_are_reassembled(puzzle_dir, tmp_path):
     """Each fragment of the cow loses a patch of its original surface (an open scan)."""
     puzzle = read_puzzle(puzzle_dir / "ground_truth.json")

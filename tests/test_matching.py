@@ -26,6 +26,7 @@ def f1(labels, pred, w):
     return 2 * tp / (w[labels == 1].sum() + w[pred].sum())
 
 
+@pytest.mark.slow
 def test_segmentation_matches_generator_labels(puzzle, prepared):
     frags, _ = prepared
     labels = np.concatenate([puzzle.labels[f.name] for f in frags])
@@ -77,8 +78,9 @@ def test_mate_signature_flips_mean_curvature_only():
     assert sig[0, 0] == 0.1  # input untouched
 
 
+@pytest.mark.slow
 def test_pairs_registered_and_ranked(puzzle, prepared):
-    # contacts of >= 10 % of the smaller surface here; the 5 % figure is benchmarks/pairwise.py's
+    # contacts of >= 10 % of the smaller surface here; the 5 % figure is benchmarks.accuracy.pairwise's
     frags, size = prepared
     gt = puzzle.ground_truth
     T_world = {n: np.asarray(v["transform"]) for n, v in gt["fragments"].items()}
@@ -103,6 +105,7 @@ def test_pairs_registered_and_ranked(puzzle, prepared):
     assert len(true_scores) >= 2 and min(true_scores) > max(other_scores, default=-1.0)
 
 
+@pytest.mark.slow
 def test_matching_deterministic(prepared):
     frags, size = prepared
     a = match_pairs(frags, size=size, pairs=[(0, 1)], seed=3)[(0, 1)]
@@ -112,6 +115,7 @@ def test_matching_deterministic(prepared):
         assert np.array_equal(x.T_target_source, y.T_target_source) and x.score == y.score
 
 
+@pytest.mark.slow
 def test_crumb_and_intact_object_reported_not_fatal(puzzle):
     import trimesh
 
@@ -181,6 +185,7 @@ def test_segmentation_retries_on_smoothed_geometry_only_when_the_break_is_a_sliv
     assert calls == ([0, seg.SegmentParams().noise_smoothing] if shares[0] < 0.1 else [0])
 
 
+@pytest.mark.slow
 def test_signature_from_the_finest_radii(prepared):
     frags, _ = prepared
     d = frags[0].descriptors
@@ -222,6 +227,7 @@ def test_middle_mixture_component_joins_the_break_only_when_it_overlaps_it(case,
     assert share == pytest.approx(sum(weights[k] for k in fracture), abs=0.1 if case.startswith("broad") else 0.05)
 
 
+@pytest.mark.slow
 def test_segmentation_of_a_noisy_cad_part(tmp_path):
     # guards the noisy CAD case end to end (bench, angle block 4 pieces with noise: F1 0.935)
     out = tmp_path / "block"

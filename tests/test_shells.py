@@ -35,6 +35,7 @@ def test_thin_walls_are_told_from_solids(bowl, puzzle):
         assert not is_thin_shell(m.vertices, m.faces, wall_thickness(m.vertices, m.faces))
 
 
+@pytest.mark.slow
 def test_sherds_are_reassembled(bowl, tmp_path):
     report = run_to_folder([bowl / "fragments"], tmp_path / "out", seed=0)
     assert report["summary"]["thin_walled"]
@@ -44,6 +45,7 @@ def test_sherds_are_reassembled(bowl, tmp_path):
     assert s["rot_geodesic_rmse_deg"] < 1.0
 
 
+@pytest.mark.slow
 def test_one_keypoint_pair_recovers_a_known_motion(bowl, rng):
     """Two mating sherds, the source moved by a seeded rigid motion: the frame hypotheses
     and ICP find it back (top candidate within 1 degree and 0.5 % of the size)."""

@@ -105,6 +105,7 @@ class _Page(HTMLParser):
             self.scripts.append(a.get("src"))
 
 
+@pytest.mark.slow
 def test_view_writes_pictures_and_a_self_contained_report(gl, run_dir, puzzle_dir, tmp_path):
     folder = tmp_path / "run"
     shutil.copytree(run_dir, folder)
@@ -141,6 +142,7 @@ def test_view_writes_pictures_and_a_self_contained_report(gl, run_dir, puzzle_di
     assert "strict part accuracy" in text and "Accepted matches" in text
 
 
+@pytest.mark.slow
 def test_view_without_gl_still_writes_the_report(run_dir, tmp_path, monkeypatch, caplog):
     import reassemble.viz.render as render
     from reassemble.view import view_folder
@@ -156,6 +158,7 @@ def test_view_without_gl_still_writes_the_report(run_dir, tmp_path, monkeypatch,
     assert len(warnings) == 1 and "pictures skipped" in warnings[0].getMessage()
 
 
+@pytest.mark.slow
 def test_view_bad_input(run_dir, tmp_path):
     rc, _, err = run("view", tmp_path / "nothing")
     assert_one_line_error(rc, err, "nothing", "reassemble run")

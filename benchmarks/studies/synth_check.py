@@ -1,7 +1,7 @@
 """Build a puzzle set (or break given meshes) and check every puzzle exactly.
 
-    python benchmarks/synth_check.py puzzles/bench              # the bench set (built if missing)
-    python benchmarks/synth_check.py held_out --meshes a.obj b.stl   # meshes never seen, 2-20 pieces
+    python -m benchmarks.studies.synth_check puzzles/bench              # the bench set (built if missing)
+    python -m benchmarks.studies.synth_check held_out --meshes a.obj b.stl   # meshes never seen, 2-20 pieces
 
 For each puzzle: fragments closed, volume conserved, zero gaps when put back, labels
 exactly the cut faces, and eval of the truth = perfect. Prints the worst figure of each.
@@ -10,22 +10,19 @@ exactly the cut faces, and eval of the truth = perfect. Prints the worst figure 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.common import header  # noqa: E402
-from data_synth.make_sets import build_set  # noqa: E402
-from data_synth.sets import SETS  # noqa: E402
-from data_synth.verify import check_puzzle  # noqa: E402
-from reassemble.errors import ReassembleError  # noqa: E402
-from reassemble.files import load_mesh, read_json, resolve_mesh_path  # noqa: E402
-from reassemble.pipeline import break_to_folder, evaluate_files, read_puzzle  # noqa: E402
-from reassemble.synth import BreakParams  # noqa: E402
+from benchmarks.common import add_json_option, start, table
+from data_synth.make_sets import build_set
+from data_synth.sets import SETS
+from data_synth.verify import check_puzzle
+from reassemble.errors import ReassembleError
+from reassemble.files import load_mesh, read_json, resolve_mesh_path
+from reassemble.pipeline import break_to_folder, evaluate_files, read_puzzle
+from reassemble.synth import BreakParams
 
 
 def check_dir(puzzle_dir: Path, mesh_path: Path) -> dict:
@@ -48,8 +45,9 @@ def main() -> int:
     parser.add_argument("--set", choices=sorted(SETS), help="set to build (default: the folder's name)")
     parser.add_argument("--meshes", nargs="*", type=Path, help="break these meshes into 2..20 pieces instead")
     parser.add_argument("--jobs", type=int, default=2)
+    add_json_option(parser)
     args = parser.parse_args()
-    header()
+    run = start()
     t0 = time.perf_counter()
     todo: list[tuple[Path, Path]] = []
     if args.meshes:
@@ -81,10 +79,16 @@ def main() -> int:
     limits = {"volume_rel_error": 1e-5, "max_gap_over_diag": 1e-6, "original_off_surface_over_diag": 1e-6,
               "fracture_area_on_original": 1e-4, "original_area_in_contact": 1e-4, "truth_part_acc_strict": 1.0}
     ok = True
+    rows = []
     for k, v in worst.items():
         good = v >= limits[k] if k.startswith("truth") else v <= limits[k]
         ok &= good
+        rows.append([k, v, limits[k], "ok" if good else "FAIL"])
         print(f"  {k:34s} {v:.3g}   (limit {limits[k]:g}) {'ok' if good else 'FAIL'}")
+    run.write(args.json, figures={"puzzles": len(todo), "worst": worst, "limits": limits, "ok": bool(ok)},
+              tables=[table(f"Exact checks of {len(todo)} puzzles: the worst figure of each", ["check", "worst", "limit",
+                                                                                              "verdict"],
+                            rows, ["", ".3g", "g", ""])])
     return 0 if ok else 1
 
 

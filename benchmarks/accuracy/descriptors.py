@@ -1,7 +1,7 @@
 """Accuracy of the integral invariants (V_r, P_r, D2_r and their curvatures) against exact values.
 
-    python benchmarks/descriptors_accuracy.py                    # about 75 s on 2 cores
-    python benchmarks/descriptors_accuracy.py --no-attribution   # about 55 s
+    python -m benchmarks.accuracy.descriptors                    # about 75 s on 2 cores
+    python -m benchmarks.accuracy.descriptors --no-attribution   # about 55 s
 
 1. sphere (icosphere, 163 842 vertices): V_r as a mean-curvature error 4 ΔV/(π r^4) against
    the lens volume of the volume-equivalent sphere; H_rob and K2 against its exact values
@@ -22,31 +22,27 @@ mesh units (the sphere and torus have unit size).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.common import header  # noqa: E402
-from benchmarks.reference import lens_volume, sphere_reference, torus_reference  # noqa: E402
-from data_synth.shapes import (  # noqa: E402
+from benchmarks.common import add_json_option, start, table
+from benchmarks.accuracy.reference import lens_volume, sphere_reference, torus_reference
+from data_synth.shapes import (
     box_mesh,
     signed_volume,
     sphere_mesh,
     torus_curvatures,
     torus_mesh,
 )
-from reassemble.descriptors import (  # noqa: E402
+from reassemble.descriptors import (
     DescriptorParams,
     curvature_difference_sq,
     integral_invariants,
     mean_curvature,
     robust_mean_curvature,
 )
-from reassemble.geometry import face_areas  # noqa: E402
+from reassemble.geometry import face_areas
 
 TORUS_R, TORUS_A = 1.0, 0.45
 
@@ -59,7 +55,7 @@ def fmt_timings(d) -> str:
     return ", ".join(f"{k} {v:.1f}" for k, v in d.timings.items()) + " s"
 
 
-def sphere_section(rng, n_query: int, params: DescriptorParams) -> list[str]:
+def sphere_section(rng, n_query: int, params: DescriptorParams, out: dict) -> list[str]:
     print("\n== 1. Sphere: icosphere, 7 subdivisions, vertices on the unit sphere ==")
     v, f = sphere_mesh(7)
     vol = signed_volume(v, f)
@@ -76,6 +72,7 @@ def sphere_section(rng, n_query: int, params: DescriptorParams) -> list[str]:
     ref = sphere_reference(pts, radii, R_eff)
     D = np.linalg.norm(pts, axis=1)
     misses = []
+    out["sphere"] = {"vertices": len(v), "queries": n_query, "rows": []}
     n = np.sort(np.abs(pts), axis=1)  # the normal's components, sorted
     classes = [("axis", n[:, 2] > 0.95), ("face-diag", (n[:, 0] < 0.05) & (n[:, 1] > 0.6)), ("body-diag", n[:, 0] > 0.5)]
     print("H err from V by normal direction: axis = within 18 deg of a grid axis (%d points), face-diag = within 3 deg "
@@ -91,6 +88,9 @@ def sphere_section(rng, n_query: int, params: DescriptorParams) -> list[str]:
         by = " / ".join(f"{rms(eH[m]):.3f}" for _, m in classes)
         print(f"  {r:<5g}  {rms(eH):>8.3f}        {eH.mean():>+7.3f}  {np.abs(eH).max():>8.3f}   [{by}]"
               f"   |  {rms(eHr):>8.3f}      {eHr.mean():>+7.3f}  |  {rms(eK):.3g}")
+        out["sphere"]["rows"].append({"r": r, "H_from_V_rms_pct": rms(eH), "H_from_V_mean_pct": float(eH.mean()),
+                                      "H_from_V_max_pct": float(np.abs(eH).max()), "H_rob_rms_pct": rms(eHr),
+                                      "K2_rms": rms(eK)})
         if rms(eH) > 0.5:
             misses.append(f"sphere V (H) at r={r}: {rms(eH):.3f} % RMS > 0.5 %")
     print("target: H error from V <= 0.5 % RMS at every r.  (H_rob and K2 against the exact values for the "
@@ -98,7 +98,7 @@ def sphere_section(rng, n_query: int, params: DescriptorParams) -> list[str]:
     return misses
 
 
-def plane_section(rng, params: DescriptorParams) -> list[str]:
+def plane_section(rng, params: DescriptorParams, out: dict) -> list[str]:
     print("\n== 2. Plane: D2_r at points near the face centres of a 3 x 3 x 3 box ==")
     size, spread, per_face = 3.0, 0.25, 20
     v, f = box_mesh(size)
@@ -119,6 +119,7 @@ def plane_section(rng, params: DescriptorParams) -> list[str]:
     d = integral_invariants(v, f, radii, points=pts, params=params)
     print(f"descriptors: {time.perf_counter() - t:.1f} s ({fmt_timings(d)})")
     misses = []
+    out["plane"] = {"points": len(pts), "rows": []}
     print("   r     D2 rel err: RMS %   mean %    max |.| %  | as K2 (1/len^2): RMS   | V rel err RMS %")
     for j, r in enumerate(radii):
         exact = 4.0 * np.pi * r**5 / 15.0
@@ -126,6 +127,8 @@ def plane_section(rng, params: DescriptorParams) -> list[str]:
         eV = (d.V[:, j] / (2 * np.pi * r**3 / 3) - 1) * 100
         print(f"  {r:<5g}  {rms(e):>8.4f}          {e.mean():>+8.4f}  {np.abs(e).max():>8.4f}    |  "
               f"{rms(d.K2[:, j]):>8.3g}           |  {rms(eV):.4f}")
+        out["plane"]["rows"].append({"r": r, "D2_rms_pct": rms(e), "D2_max_pct": float(np.abs(e).max()),
+                                     "K2_rms": rms(d.K2[:, j]), "V_rms_pct": rms(eV)})
         if rms(e) > 0.5:
             misses.append(f"plane D2 at r={r}: {rms(e):.3f} % RMS > 0.5 %")
     print("target: D2 relative error <= 0.5 %.  (K2 = -28 (ΔD2/D2) / r^2 here: the exact K2 is 0)")
@@ -178,7 +181,7 @@ def _errors(d, ref, j, r):
     return {"H": (d.H[:, j], Hr), "H_rob": (d.H_rob[:, j], Hrr), "K2": (d.K2[:, j], K2r)}
 
 
-def torus_section(rng, n_query: int, target: int, params: DescriptorParams):
+def torus_section(rng, n_query: int, target: int, params: DescriptorParams, out: dict):
     print(f"\n== 3. Torus R = {TORUS_R}, a = {TORUS_A}: numerical error vs Taylor truncation floor ==")
     v, f = torus_mesh(TORUS_R, TORUS_A, target_vertices=target)
     edge = np.linalg.norm(v[f[:, 0]] - v[f[:, 1]], axis=1).mean()
@@ -213,6 +216,9 @@ def torus_section(rng, n_query: int, target: int, params: DescriptorParams):
             en, ef = num - refv, refv - true
             ok = rms(en) <= rms(ef)
             rows.append((name, r, rms(en), rms(ef), ok))
+            out.setdefault("torus", {"vertices": len(v), "queries": n_query, "rows": []})["rows"].append(
+                {"quantity": name, "r": r, "numerical_rms": rms(en), "floor_rms": rms(ef), "within_floor": bool(ok),
+                 "mesh_part_rms": rms(mesh_part[name]) if name in mesh_part else None})
             if name in mesh_part:
                 mp = f"{rms(mesh_part[name]):>10.4f}     {rms(en - mesh_part[name]):>10.4f}"
             else:
@@ -222,7 +228,7 @@ def torus_section(rng, n_query: int, target: int, params: DescriptorParams):
     return rows, (v, f, q, edge, d, ref)
 
 
-def attribution_section(torus, params: DescriptorParams, target: int, n_points: int = 100) -> None:
+def attribution_section(torus, params: DescriptorParams, target: int, out: dict, n_points: int = 100) -> None:
     """The numerical error at r = 0.1 again with a 2x finer grid, and on a mesh with 4x the vertices."""
     v, f, q, edge, d, ref = torus
     r, j = 0.1, 1
@@ -247,11 +253,13 @@ def attribution_section(torus, params: DescriptorParams, target: int, n_points: 
     ref4 = torus_reference(v4[q4], [r], TORUS_R, TORUS_A, with_error=False)
     cases.append((f"4x vertices: {len(v4)} ({time.perf_counter() - t:.0f} s)", _errors(d4, ref4, 0, r)))
     print(f"{'case':<58s}" + "".join(f"{k:>10s}" for k in base))
+    out["attribution"] = {"r": r, "points": n_points, "rows": []}
     for name, errs in cases:
         print(f"{name:<58s}" + "".join(f"{rms(a - b):>10.4f}" for a, b in errs.values()))
+        out["attribution"]["rows"].append({"case": name.split(" (")[0], **{k: rms(a - b) for k, (a, b) in errs.items()}})
 
 
-def noisy_section(rng, torus, params: DescriptorParams) -> list[str]:
+def noisy_section(rng, torus, params: DescriptorParams, out: dict) -> list[str]:
     v, f, q, edge = torus[:4]
     r = 0.2
     sigma = 0.3 * edge
@@ -287,14 +295,20 @@ def noisy_section(rng, torus, params: DescriptorParams) -> list[str]:
     except ImportError as exc:  # trimesh's face_adjacency_tree needs the optional rtree package
         print(f"   (trimesh's discrete mean curvature measure skipped: {exc}; pip install rtree)")
     misses = []
+    out["noisy_torus"] = {"r": r, "sigma": sigma, "rows": []}
     for name, mesh, est, ht in estimates:
         e = est - ht
+        out["noisy_torus"]["rows"].append({"estimator": name, "mesh": mesh, "rms_error": rms(e),
+                                           "rms_error_over_rms_H_pct": rms(e) / rms(ht) * 100,
+                                           "per_point_relative_rms_pct": rms(e / ht) * 100})
         print(f"{name:<42s}  {mesh:<6s}  {rms(e):>10.4f}  ({e.mean():>+8.4f})   {rms(e) / rms(ht) * 100:>8.2f} %       "
               f"{rms(e / ht) * 100:>8.2f} %")
         if name.startswith("H_rob") and mesh == "noisy" and rms(e / ht) > 0.05:
             misses.append(f"noisy torus H_rob: per-point relative error {rms(e / ht) * 100:.2f} % RMS > 5 % "
                           f"(RMS error / RMS H: {rms(e) / rms(ht) * 100:.2f} %)")
     eK = d.K2[:, 0] - K2_true
+    out["noisy_torus"].update(K2_true_rms=rms(K2_true), K2_noisy_rms_error=rms(eK), K2_noisy_mean_error=float(eK.mean()),
+                              K2_clean_rms_error=rms(d_clean.K2[:, 0] - K2_clean_true))
     print(f"and (kappa1 - kappa2)^2, true RMS {rms(K2_true):.3f} 1/len^2: RMS error (mean) of K2 noisy {rms(eK):.3f} "
           f"({eK.mean():+.3f}), clean {rms(d_clean.K2[:, 0] - K2_clean_true):.3f} (including the truncation floor)")
     # distances to a rough surface are shorter on both sides of it, by about the noise's local maximum
@@ -311,7 +325,7 @@ def noisy_section(rng, torus, params: DescriptorParams) -> list[str]:
     return misses
 
 
-def principal_section(rng, torus, params: DescriptorParams) -> None:
+def principal_section(rng, torus, params: DescriptorParams, out: dict) -> None:
     """(kappa1 - kappa2)^2 from the covariance of ball ∩ solid against K2 from D2, clean and noisy."""
     print("\n== 5. Principal curvatures from the covariance of ball ∩ solid (--principal), torus ==")
     v, f = torus[:2]
@@ -333,6 +347,11 @@ def principal_section(rng, torus, params: DescriptorParams) -> None:
         for j, r in enumerate(radii):
             ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", d.normal[:, j], n_true), -1, 1)))
             dang = np.degrees(np.arcsin(np.clip(np.abs(np.einsum("ij,ij->i", d.dir1[:, j], around)), 0, 1)))
+            out.setdefault("principal", []).append(
+                {"mesh": name, "r": r, "K2_cov_rms_error": rms(d.K2_cov[:, j] - K2_true),
+                 "K2_rms_error": rms(d.K2[:, j] - K2_true), "k1_rms_error": rms(d.k1[:, j] - 1 / TORUS_A),
+                 "normal_median_deg": float(np.median(ang)), "normal_max_deg": float(ang.max()),
+                 "dir1_median_deg": float(np.median(dang))})
             print(f"{name:6s} {r:<5} {rms(d.K2_cov[:, j] - K2_true):>12.3f}   {rms(d.K2[:, j] - K2_true):>15.3f}   "
                   f"{rms(d.k1[:, j] - 1 / TORUS_A):>10.3f}   {np.median(ang):>10.2f} / {ang.max():<8.2f}"
                   f"            {np.median(dang):>8.2f}")
@@ -346,26 +365,79 @@ def main() -> int:
     parser.add_argument("--torus-queries", type=int, default=200)
     parser.add_argument("--torus-vertices", type=int, default=70_000)
     parser.add_argument("--no-attribution", action="store_true", help="skip 3b (finer grids, finer mesh): ~20 s")
+    add_json_option(parser)
     args = parser.parse_args()
-    header()
+    run = start()
     params = DescriptorParams()
     print(f"DescriptorParams: {params}")
     t0 = time.perf_counter()
     rng = np.random.default_rng(args.seed)
-    misses = sphere_section(rng, args.sphere_queries, params)
-    misses += plane_section(rng, params)
-    rows, torus = torus_section(rng, args.torus_queries, args.torus_vertices, params)
+    out: dict = {"params": dict(params.__dict__)}
+    misses = sphere_section(rng, args.sphere_queries, params, out)
+    misses += plane_section(rng, params, out)
+    rows, torus = torus_section(rng, args.torus_queries, args.torus_vertices, params, out)
     misses += [f"torus {n} at r={r}: numerical {a:.4f} > floor {b:.4f}" for n, r, a, b, ok in rows if not ok]
     if not args.no_attribution:
-        attribution_section(torus, params, args.torus_vertices)
-    misses += noisy_section(rng, torus, params)
-    principal_section(rng, torus, params)
+        attribution_section(torus, params, args.torus_vertices, out)
+    misses += noisy_section(rng, torus, params, out)
+    principal_section(rng, torus, params, out)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")
     print("missed (targets; torus rows whose numerical error exceeds the truncation floor):" if misses else "all targets met")
     for m in misses:
         print("  " + m)
+    out["missed"] = misses
+    run.write(args.json, figures=out, tables=_tables(out), headline=_headline(out))
     return 0
 
 
+def _tables(out: dict) -> list[dict]:
+    sph, pl, tor, noisy = out["sphere"], out["plane"], out["torus"], out["noisy_torus"]
+    tables = [
+        table(f"Unit sphere ({sph['vertices']} vertices, {sph['queries']} query vertices): error of V as a mean-curvature "
+              "error, H_rob and K2 against the exact values (target: H from V <= 0.5 % RMS)",
+              ["r", "H from V: RMS %", "max %", "H_rob: RMS %", "K2: RMS (1/len^2)"],
+              [[x["r"], x["H_from_V_rms_pct"], x["H_from_V_max_pct"], x["H_rob_rms_pct"], x["K2_rms"]] for x in sph["rows"]],
+              ["g", ".3f", ".3f", ".3f", ".3g"]),
+        table(f"Plane (faces of a box, {pl['points']} points): D2 against 4 pi r^5 / 15 (target <= 0.5 %)",
+              ["r", "D2: RMS %", "max %", "V: RMS %"],
+              [[x["r"], x["D2_rms_pct"], x["D2_max_pct"], x["V_rms_pct"]] for x in pl["rows"]],
+              ["g", ".4f", ".4f", ".4f"]),
+        table(f"Torus R = 1, a = 0.45 ({tor['vertices']} vertices): numerical error beside the Taylor truncation floor "
+              "(RMS; H in 1/len, K2 in 1/len^2)",
+              ["quantity", "r", "numerical", "of it, flat triangles", "floor", "within floor"],
+              [[x["quantity"], x["r"], x["numerical_rms"], "-" if x["mesh_part_rms"] is None else x["mesh_part_rms"],
+                x["floor_rms"], "yes" if x["within_floor"] else "no"] for x in tor["rows"]],
+              ["", "g", ".4f", ".4f", ".4f", ""]),
+    ]
+    if "attribution" in out:
+        at = out["attribution"]
+        tables.append(table(f"Torus, r = {at['r']}: what the numerical error follows (RMS over {at['points']} points)",
+                            ["case", "H", "H_rob", "K2"],
+                            [[x["case"], x["H"], x["H_rob"], x["K2"]] for x in at["rows"]], ["", ".4f", ".4f", ".4f"]))
+    tables.append(table(f"Noisy torus (sigma = 0.3 x mean edge), r = {noisy['r']}: mean curvature against the truth "
+                        "(target: H_rob on the noisy mesh <= 5 % per-point relative RMS)",
+                        ["estimator", "mesh", "RMS error (1/len)", "RMS error / RMS H %", "per-point relative RMS %"],
+                        [[x["estimator"], x["mesh"], x["rms_error"], x["rms_error_over_rms_H_pct"],
+                          x["per_point_relative_rms_pct"]] for x in noisy["rows"]], ["", "", ".4f", ".2f", ".2f"]))
+    tables.append(table("Principal curvatures from the covariance of ball and solid (torus, 300 vertices)",
+                        ["mesh", "r", "K2_cov RMS err", "K2 (D2) RMS err", "k1 RMS err", "normal median deg",
+                         "dir1 median deg"],
+                        [[x["mesh"], x["r"], x["K2_cov_rms_error"], x["K2_rms_error"], x["k1_rms_error"],
+                          x["normal_median_deg"], x["dir1_median_deg"]] for x in out["principal"]],
+                        ["", "g", ".3f", ".3f", ".3f", ".2f", ".2f"]))
+    return tables
+
+
+def _headline(out: dict) -> list[tuple[str, str]]:
+    sph = [x["H_from_V_rms_pct"] for x in out["sphere"]["rows"]]
+    noisy = [x for x in out["noisy_torus"]["rows"] if x["estimator"].startswith("H_rob") and x["mesh"] == "noisy"]
+    rows = [("Descriptors: unit sphere, V as mean-curvature error (RMS, r = 0.1-0.5)",
+             f"{min(sph):.2f}-{max(sph):.2f} % (target <= 0.5 %)")]
+    if noisy:
+        rows.append(("Descriptors: noisy torus, H_rob RMS error / RMS H",
+                     f"{noisy[0]['rms_error_over_rms_H_pct']:.1f} % (target <= 5 %)"))
+    return rows
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

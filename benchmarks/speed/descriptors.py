@@ -1,7 +1,7 @@
 """Speed and memory of the integral invariants, and how they grow with mesh size and r/h.
 
-    python benchmarks/descriptors_speed.py            # spot, loop-subdivided to 46k .. 737k vertices
-    python benchmarks/descriptors_speed.py --big      # also 2.9M vertices
+    python -m benchmarks.speed.descriptors            # spot, loop-subdivided to 46k .. 737k vertices
+    python -m benchmarks.speed.descriptors --big      # also 2.9M vertices
 
 8 radii from 2 % to 10 % of the bounding-box diagonal (geometric), all vertices queried,
 default settings; V/P (volume descriptors) and D2 timed separately. Each configuration
@@ -16,11 +16,8 @@ import argparse
 import json
 import subprocess
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.common import header  # noqa: E402
+from benchmarks.common import ROOT, add_json_option, start, table
 
 CHILD = r"""
 import json, resource, sys, time
@@ -67,18 +64,21 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--big", action="store_true", help="include 2.9M vertices")
     parser.add_argument("--no-d2", action="store_true", help="time only V/P")
+    add_json_option(parser)
     args = parser.parse_args()
-    header()
-    mesh = str(Path(__file__).resolve().parents[1] / "reassemble" / "data" / "meshes" / "spot.obj")
+    bench = start()
+    mesh = str(ROOT / "reassemble" / "data" / "meshes" / "spot.obj")
     print("mesh: spot.obj loop-subdivided (100k: decimated from 184k); radii 2-10 % of the diagonal,")
     print("8 geometric; all vertices queried; one-time imports and Open3D start-up timed apart")
     print(f"{'vertices':>9} {'part':>5} {'seconds':>8} {'peak GB':>8}  stages")
+    sizes, resolutions = [], []
     for levels in ([1, -2, 2, 3, 4] if args.big else [1, -2, 2, 3]):
         for d2 in ([False] if args.no_d2 else [False, True]):
             r = run(levels, d2, 8.0, mesh)
             if "error" in r:
                 print(f"  {levels} subdivisions, d2={d2}: {r['error']}")
                 continue
+            sizes.append({"d2": d2, **r})
             stages = ", ".join(f"{k} {v:.2f}" for k, v in r["timings"].items() if k != "total")
             print(f"{r['vertices']:>9} {'V+D2' if d2 else 'V,P':>5} {r['seconds']:8.2f} {r['peak_gb']:8.2f}  {stages}"
                   f"  (first call {r['first']:.2f} s; start-up {r['warmup']:.2f} s)", flush=True)
@@ -89,6 +89,20 @@ def main() -> int:
             print(f"  resolution {res:4.0f}: {r['error']}")
             continue
         print(f"  resolution {res:4.0f}: {r['seconds']:6.2f} s, peak {r['peak_gb']:.2f} GB", flush=True)
+        resolutions.append({"resolution": res, **r})
+    by_n: dict[int, dict] = {}
+    for x in sizes:
+        by_n.setdefault(x["vertices"], {})["d2" if x["d2"] else "vp"] = x
+    rows = [[n, d["vp"]["seconds"] if "vp" in d else None, d["d2"]["seconds"] if "d2" in d else None,
+             max(x["peak_gb"] for x in d.values())] for n, d in sorted(by_n.items())]
+    bench.write(args.json, figures={"sizes": sizes, "resolutions": resolutions},
+                tables=[table("spot.obj subdivided; 8 radii 2-10 % of the diagonal, all vertices (median of three "
+                              "calls after start-up)", ["vertices", "V, P, H, H_rob s", "with D2, K2 s", "peak GB"],
+                              [[a, "-" if b is None else b, "-" if c is None else c, d] for a, b, c, d in rows],
+                              ["d", ".1f", ".1f", ".1f"]),
+                        table("Voxels per radius (r/h), V and P only", ["resolution", "vertices", "seconds", "peak GB"],
+                              [[x["resolution"], x["vertices"], x["seconds"], x["peak_gb"]] for x in resolutions],
+                              ["g", "d", ".2f", ".2f"])])
     return 0
 
 

@@ -1,28 +1,25 @@
 """Segmentation alone on the bench set: area-weighted F1, precision and recall per puzzle.
 
-    python benchmarks/segmentation.py puzzles/bench                    # 2, 4, 8 pieces, seed 0, clean + noisy
-    python benchmarks/segmentation.py puzzles/bench --noisy-only --jobs 2
+    python -m benchmarks.accuracy.segmentation puzzles/bench                    # 2, 4, 8 pieces, seed 0, clean + noisy
+    python -m benchmarks.accuracy.segmentation puzzles/bench --noisy-only --jobs 2
 
 The descriptors of every puzzle are computed once and cached beside the set
 (``benchmarks.common.described``: keyed by the fragments, the options and the descriptor
 code), so after the first run the whole selection is segmented again in seconds: the loop
-for studying :mod:`reassemble.segmentation`. The F1 is the one ``benchmarks/pairwise.py``
+for studying :mod:`reassemble.segmentation`. The F1 is the one ``benchmarks.accuracy.pairwise``
 reports (same segmentation, same seed).
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.common import add_selection, described, header, select  # noqa: E402
+from benchmarks.common import add_selection, described, select, start, table
 
 
 def run_puzzle(gt_path: str, seed: int) -> dict:
@@ -59,7 +56,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_selection(parser, pieces="2,4,8")
     args = parser.parse_args()
-    header()
+    run = start()
     specs = select(args)
     paths = [str(args.root / s.name / "ground_truth.json") for s in specs]
     print(f"{'puzzle':<36s} {'frags':>5s} {'F1':>6s} {'prec':>6s} {'recall':>6s} {'true':>6s} "
@@ -74,12 +71,34 @@ def main() -> int:
                   f"{r['true_share']:>6.3f} {name:>17s} {f1w:>6.3f} {r['t_describe']:>10.1f} {r['t_segment']:>9.1f}",
                   flush=True)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")
+    summary = []
     for group, keep in (("all", lambda s: True), ("clean", lambda s: not s.noise), ("noisy", lambda s: bool(s.noise))):
         rs = [r for s, r in zip(specs, results) if keep(s)]
         if rs:
-            print(f"{group:>5s}: {len(rs)} puzzles; F1 mean {np.mean([r['f1'] for r in rs]):.3f} "
-                  f"(min {min(r['f1'] for r in rs):.3f}); precision {np.mean([r['precision'] for r in rs]):.3f}, "
-                  f"recall {np.mean([r['recall'] for r in rs]):.3f}")
+            worst = min(rs, key=lambda r: r["f1"])
+            summary.append({"group": group, "puzzles": len(rs), "f1_mean": float(np.mean([r["f1"] for r in rs])),
+                            "f1_min": worst["f1"], "f1_min_puzzle": worst["name"],
+                            "precision_mean": float(np.mean([r["precision"] for r in rs])),
+                            "recall_mean": float(np.mean([r["recall"] for r in rs]))})
+            print(f"{group:>5s}: {len(rs)} puzzles; F1 mean {summary[-1]['f1_mean']:.3f} "
+                  f"(min {worst['f1']:.3f}); precision {summary[-1]['precision_mean']:.3f}, "
+                  f"recall {summary[-1]['recall_mean']:.3f}")
+    for r in results:
+        r["worst"] = {"f1": r["worst"][0], "fragment": r["worst"][1]}
+    tables = [
+        table("Area-weighted fracture-label scores, mean over puzzles (target: F1 >= 0.95)",
+              ["puzzles", "n", "F1", "F1 min", "lowest", "precision", "recall"],
+              [[x["group"], x["puzzles"], x["f1_mean"], x["f1_min"], x["f1_min_puzzle"], x["precision_mean"],
+                x["recall_mean"]] for x in summary], ["", "d", ".3f", ".3f", "", ".3f", ".3f"]),
+        table("Per puzzle", ["puzzle", "fragments", "F1", "precision", "recall", "fracture share", "worst fragment F1"],
+              [[r["name"], r["fragments"], r["f1"], r["precision"], r["recall"], r["true_share"], r["worst"]["f1"]]
+               for r in results], ["", "d", ".3f", ".3f", ".3f", ".3f", ".3f"]),
+    ]
+    headline = [(f"Segmentation F1 ({x['group']}, {x['puzzles']} {args.set} puzzles of {args.pieces} pieces)",
+                 f"{x['f1_mean']:.3f} (target >= 0.95)")
+                for x in summary if x["group"] != "all"]
+    run.write(args.json, figures={"summary": summary, "puzzles": results, "jobs": args.jobs},
+              tables=tables, headline=headline)
     return 0
 
 

@@ -1,7 +1,7 @@
 """How well `geometry.vertex_noise` estimates scan noise, and the contact tolerance it sets.
 
-    python benchmarks/noise_estimate.py puzzles/bench                   # all seeds 0, clean and noisy
-    python benchmarks/noise_estimate.py puzzles/bench --seeds 0,1,2
+    python -m benchmarks.accuracy.noise_estimate puzzles/bench                   # all seeds 0, clean and noisy
+    python -m benchmarks.accuracy.noise_estimate puzzles/bench --seeds 0,1,2
 
 Per puzzle: the set's estimate (median over fragments) as a fraction of the reference
 size, the true sigma of the added noise (the generator's, per coordinate; 0 when clean)
@@ -13,27 +13,23 @@ and how many clean puzzles keep the default tolerance.
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.common import add_selection, header, select  # noqa: E402
+from benchmarks.common import add_selection, select, start, table
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_selection(parser, pieces="2,4,8,12,20")
     args = parser.parse_args()
-    header()
+    run = start()
     from reassemble.geometry import vertex_noise
     from reassemble.pipeline import read_puzzle, reference_size
     from reassemble.registration import RegistrationParams, with_noise
 
     default = RegistrationParams()
-    ratios, clean, kept = [], [], 0
+    ratios, clean, kept, rows = [], [], 0, []
     print(f"{'puzzle':<42s} {'estimate':>9s} {'true':>9s} {'ratio':>6s} {'tolerance':>9s}  (fractions of the size)")
     for spec in select(args):
         puzzle = read_puzzle(args.root / spec.name / "ground_truth.json", with_labels=False)
@@ -45,6 +41,8 @@ def main() -> int:
         true = spec.noise * diagonal
         tol = with_noise(default, noise=estimate, size=size).tolerance
         ratio = estimate / true if true else float("nan")
+        rows.append({"puzzle": spec.name, "estimate": estimate / size, "true": true / size,
+                     "ratio": ratio if true else None, "tolerance": float(tol)})
         if true:
             ratios.append(ratio)
         else:
@@ -57,6 +55,18 @@ def main() -> int:
     if clean:
         print(f"clean ({len(clean)}): largest estimate {max(clean):.5f} of the size; "
               f"{kept} of {len(clean)} keep the default tolerance {default.tolerance}")
+    summary = []
+    if ratios:
+        summary.append(["noisy", len(ratios), "estimate / true sigma", f"median {np.median(ratios):.3f}, "
+                        f"range {min(ratios):.3f} - {max(ratios):.3f}"])
+    if clean:
+        summary.append(["clean", len(clean), "largest estimate / size; default tolerance kept",
+                        f"{max(clean):.5f}; {kept} of {len(clean)}"])
+    run.write(args.json, figures={"puzzles": rows, "default_tolerance": default.tolerance,
+                                  "noisy_ratio_median": float(np.median(ratios)) if ratios else None,
+                                  "clean_largest_estimate": max(clean) if clean else None, "clean_kept_default": kept},
+              tables=[table("Vertex-noise estimate (geometry.vertex_noise) against the added noise",
+                            ["puzzles", "n", "figure", "value"], summary, ["", "d", "", ""])])
     return 0
 
 

@@ -1,7 +1,7 @@
 """Could a cheap test skip pairs before the full match? Recall of candidate pair priors.
 
-    python benchmarks/pair_pruning.py puzzles/bench                     # 20 pieces, seed 0, clean + noisy
-    python benchmarks/pair_pruning.py puzzles/bench --meshes torus,spot --full --jobs 2
+    python -m benchmarks.studies.pair_pruning puzzles/bench                     # 20 pieces, seed 0, clean + noisy
+    python -m benchmarks.studies.pair_pruning puzzles/bench --meshes torus,spot --full --jobs 2
 
 Every pair of a puzzle's fragments gets a prior score, cheaply, from what exists after the
 descriptors; a pruning would fully match only the pairs with the highest priors. Per prior
@@ -22,15 +22,11 @@ Priors:
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.common import add_selection, header, select  # noqa: E402
+from benchmarks.common import add_selection, select, start, table
 
 
 def truth_share(gt: dict, frags) -> np.ndarray:
@@ -96,18 +92,25 @@ def full_prior(frags, *, size: float, params, jobs: int) -> np.ndarray:
     return S
 
 
-def measure(S: np.ndarray, share: np.ndarray) -> str:
+def measure(S: np.ndarray, share: np.ndarray) -> dict:
+    """ROC AUC of touching against apart pairs, and the shares kept by the best half / two thirds."""
     from sklearn.metrics import roc_auc_score
 
     iu = np.triu_indices(len(S), 1)
     x, sh = S[iu], share[iu]
     touch, apart = sh >= 0.05, sh == 0
     auc = roc_auc_score(touch[touch | apart], x[touch | apart]) if touch.any() and apart.any() else float("nan")
-    out = f"AUC {auc:.3f}"
-    for keep in (0.5, 2 / 3):
+    out = {"auc": float(auc)}
+    for label, keep in (("half", 0.5), ("two_thirds", 2 / 3)):
         kept = x >= np.quantile(x, 1 - keep)
-        out += f" | best {keep:.2f}: {kept[touch].mean():.2f} / {kept[sh > 0].mean():.2f}"
+        out[f"{label}_touching"] = float(kept[touch].mean())
+        out[f"{label}_any_contact"] = float(kept[sh > 0].mean())
     return out
+
+
+def say(m: dict) -> str:
+    return (f"AUC {m['auc']:.3f} | best 0.50: {m['half_touching']:.2f} / {m['half_any_contact']:.2f}"
+            f" | best 0.67: {m['two_thirds_touching']:.2f} / {m['two_thirds_any_contact']:.2f}")
 
 
 def main() -> int:
@@ -115,11 +118,12 @@ def main() -> int:
     add_selection(parser, pieces="20")
     parser.add_argument("--full", action="store_true", help="also the full registration's best score (slow)")
     args = parser.parse_args()
-    header()
+    run = start()
     from reassemble.pipeline import prepare_fragments, read_puzzle, registration_params
 
     specs = select(args)
     print("kept shares: touching pairs (contact >= 5 %) / pairs with any contact")
+    rows = []
     for spec in specs:
         puzzle = read_puzzle(args.root / spec.name / "ground_truth.json", with_labels=False)
         frags, size = prepare_fragments({n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}, seed=args.seed,
@@ -134,7 +138,15 @@ def main() -> int:
             t = time.perf_counter()
             S = fn()
             dt = (time.perf_counter() - t) / n_pairs
-            print(f"{spec.name:<34s} {name:>4s} {dt:6.3f} s/pair  {measure(S, share)}", flush=True)
+            m = measure(S, share)
+            rows.append({"puzzle": spec.name, "prior": name, "seconds_per_pair": dt, **m})
+            print(f"{spec.name:<34s} {name:>4s} {dt:6.3f} s/pair  {say(m)}", flush=True)
+    run.write(args.json, figures={"puzzles": rows},
+              tables=[table("Pair priors: ROC AUC of touching (contact >= 5 %) against apart pairs, and the share of "
+                            "touching pairs kept by the best half / two thirds of the pairs",
+                            ["puzzle", "prior", "s / pair", "AUC", "kept, best half", "kept, best two thirds"],
+                            [[x["puzzle"], x["prior"], x["seconds_per_pair"], x["auc"], x["half_touching"],
+                              x["two_thirds_touching"]] for x in rows], ["", "", ".3f", ".3f", ".2f", ".2f"])])
     return 0
 
 

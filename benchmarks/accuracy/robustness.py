@@ -1,7 +1,7 @@
 """Strict part accuracy of `reassemble run` against scan noise and against gaps between pieces.
 
-    python benchmarks/robustness.py --jobs 2                                   # the default curves
-    python benchmarks/robustness.py --meshes spot,torus --pieces 8 --noise 0,0.005 --gaps "" --decimate "" --jobs 2
+    python -m benchmarks.accuracy.robustness --jobs 2                                   # the default curves
+    python -m benchmarks.accuracy.robustness --meshes spot,torus --pieces 8 --noise 0,0.005 --gaps "" --decimate "" --jobs 2
 
 Every mesh is broken (`reassemble break`, the bench set's meshes and seed 0) once per
 setting: vertex noise sigma (fraction of the object diagonal) with no gap, gaps
@@ -15,7 +15,6 @@ puzzle, then the curves: mean strict part accuracy and share solved per level.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -23,9 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.common import add_signature_radii, header, match_config  # noqa: E402
+from benchmarks.common import add_json_option, add_signature_radii, match_config, start, table
 
 MESHES = "spot,fish_low_resolution,torus,wingnut,angle_block,featuretype"
 
@@ -59,8 +56,9 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once")
     add_signature_radii(parser)
+    add_json_option(parser)
     args = parser.parse_args()
-    header()
+    run = start()
     tasks = [(m, int(p), kind, float(level), args.seed, args.signature_radii)
              for kind, levels in (("noise", args.noise), ("gap", args.gaps), ("decimate", args.decimate))
              for level in levels.split(",") if level
@@ -75,12 +73,21 @@ def main() -> int:
             print(f"{r['mesh']:<22s} {r['pieces']:>6d} {r['kind']:>8s} {r['level']:>6g} {r['strict']:>6.3f} "
                   f"{str(r['solved']):>6s} {r['rot']:>8.2f} {r['time']:>7.1f}", flush=True)
     print(f"\ncurves (mean over {len(args.meshes.split(','))} meshes x pieces {args.pieces}):")
+    curves = []
     for kind in ("noise", "gap", "decimate"):
         for level in sorted({r["level"] for r in rows if r["kind"] == kind}):
             sel = [r for r in rows if r["kind"] == kind and r["level"] == level]
-            print(f"  {kind:>8s} {level:>6g} of the diagonal: strict {np.mean([r['strict'] for r in sel]):.3f}, "
+            curves.append({"kind": kind, "level": level, "puzzles": len(sel),
+                           "strict": float(np.mean([r["strict"] for r in sel])),
+                           "solved": int(sum(bool(r["solved"]) for r in sel))})
+            print(f"  {kind:>8s} {level:>6g} of the diagonal: strict {curves[-1]['strict']:.3f}, "
                   f"solved {np.mean([r['solved'] for r in sel]):.3f} ({len(sel)} puzzles)")
     print(f"total {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")
+    run.write(args.json, figures={"curves": curves, "puzzles": rows},
+              tables=[table(f"Strict part accuracy and puzzles solved per level ({args.meshes}; pieces {args.pieces}; "
+                            "levels are fractions of the diagonal)", ["kind", "level", "puzzles", "strict", "solved"],
+                            [[x["kind"], x["level"], x["puzzles"], x["strict"], x["solved"]] for x in curves],
+                            ["", "g", "d", ".3f", "d"])])
     return 0
 
 

@@ -1,7 +1,7 @@
 """Open scans: the Stanford bunny scan (holes in its base) and fragments scanned with holes.
 
-    python benchmarks/open_scan.py                       # ../shared/data/meshes/stanford-bunny-scan
-    python benchmarks/open_scan.py MESH --pieces 4,8 --seeds 0,1,2
+    python -m benchmarks.accuracy.open_scan                       # ../shared/data/meshes/stanford-bunny-scan
+    python -m benchmarks.accuracy.open_scan MESH --pieces 4,8 --seeds 0,1,2
 
 Two cases, each run with ``--fill-holes`` and scored with ``reassemble eval``:
 - the open scan closed (``holes.fill_holes``), broken into pieces (``reassemble break``),
@@ -15,19 +15,16 @@ Prints per puzzle the holes closed, strict and Breaking Bad part accuracy, and t
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.common import ROOT, add_json_option, start, table
+from data_synth.scans import punch_holes
 
-from benchmarks.common import header  # noqa: E402
-from data_synth.scans import punch_holes  # noqa: E402
-
-DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "meshes" / "stanford-bunny-scan" / "stanford-bunny.obj"
+DEFAULT = ROOT.parent / "shared" / "data" / "meshes" / "stanford-bunny-scan" / "stanford-bunny.obj"
 
 
 def main() -> int:
@@ -38,8 +35,9 @@ def main() -> int:
     parser.add_argument("--hole", type=float, default=0.03, help="radius of the holes punched / diagonal")
     parser.add_argument("--fill-holes", type=float, default=0.25)
     parser.add_argument("--jobs", type=int, default=2)
+    add_json_option(parser)
     args = parser.parse_args()
-    header()
+    run = start()
     from reassemble.errors import ReassembleError
     from reassemble.files import load_mesh
     from reassemble.pipeline import Config, break_to_folder, evaluate_files, run_to_folder
@@ -51,6 +49,7 @@ def main() -> int:
     print(f"{'puzzle':<24s} {'case':<22s} {'strict':>6s} {'BB':>6s} {'solved':>6s} {'time s':>7s}")
     config = Config(fill_holes=args.fill_holes)
     totals: dict[str, list] = {}
+    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for pieces in (int(x) for x in args.pieces.split(",")):
@@ -75,6 +74,10 @@ def main() -> int:
                     s = evaluate_files(out / "transforms.json", puzzle / "ground_truth.json",
                                        seed=seed)["alignments"]["anchor_largest"]["summary"]
                     totals.setdefault(case, []).append(s)
+                    rows.append({"puzzle": name, "pieces": pieces, "seed": seed, "case": case,
+                                 "strict": s["part_acc_strict"], "part_acc": s["part_acc"],
+                                 "solved": bool(s["solved"]), "time": elapsed,
+                                 **({} if case.startswith("closed") else {"refused_without_fill_holes": refused})})
                     print(f"{name:<24s} {case:<22s} {s['part_acc_strict']:>6.3f} {s['part_acc']:>6.3f} "
                           f"{str(s['solved']):>6s} {elapsed:>7.1f}"
                           + ("" if case.startswith("closed") else f"  (without --fill-holes: "
@@ -82,6 +85,14 @@ def main() -> int:
     for case, ss in totals.items():
         print(f"{case}: strict part accuracy mean {np.mean([s['part_acc_strict'] for s in ss]):.3f}, "
               f"solved {sum(s['solved'] for s in ss)} of {len(ss)}")
+    run.write(args.json, figures={"mesh": args.mesh.name, "faces": len(scan.faces), "holes_closed": scan.filled_holes,
+                                  "puzzles": rows},
+              tables=[table(f"{args.mesh.name} ({len(scan.filled_holes)} holes closed): strict and Breaking Bad part "
+                            "accuracy per puzzle", ["puzzle", "case", "strict", "BB part acc", "solved", "time s",
+                                                    "refused without --fill-holes"],
+                            [[x["puzzle"], x["case"], x["strict"], x["part_acc"], "yes" if x["solved"] else "no",
+                              x["time"], {True: "yes", False: "NO"}.get(x.get("refused_without_fill_holes"), "")]
+                             for x in rows], ["", "", ".3f", ".3f", "", ".1f", ""])])
     return 0
 
 

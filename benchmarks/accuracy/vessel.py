@@ -1,7 +1,7 @@
 """The third-party vessel set: thin-walled sherds with gaps between them, scored against the truth.
 
-    python benchmarks/vessel.py                  # ../shared/data/meshes/vessel-TU_96_2-5-fragments
-    python benchmarks/vessel.py FOLDER --jobs 2
+    python -m benchmarks.accuracy.vessel                  # ../shared/data/meshes/vessel-TU_96_2-5-fragments
+    python -m benchmarks.accuracy.vessel FOLDER --jobs 2
 
 The fragments are stored in their assembled pose (the truth is the identity for each). They
 are moved by seeded random rigid motions first (so nothing can profit from the given pose),
@@ -27,18 +27,15 @@ normals they replace).
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.common import ROOT, add_json_option, start, table
 
-from benchmarks.common import header  # noqa: E402
-
-DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "meshes" / "vessel-TU_96_2-5-fragments"
+DEFAULT = ROOT.parent / "shared" / "data" / "meshes" / "vessel-TU_96_2-5-fragments"
 
 
 def main() -> int:
@@ -48,8 +45,9 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--gap", type=float, default=None, help="as run --gap (default: measured)")
     parser.add_argument("--diagnose", action="store_true", help="what the geometry says about the gaps")
+    add_json_option(parser)
     args = parser.parse_args()
-    header()
+    run = start()
     from reassemble.geometry import face_areas, invert_transform, make_transform, random_rotation, transform_points
     from reassemble.files import load_mesh, read_json, write_ply
     from reassemble.metrics import ScoringFragment, evaluate
@@ -107,6 +105,18 @@ def main() -> int:
     if args.diagnose:
         diagnose({n: (m.vertices, m.faces) for n, m in meshes.items()}, shifts, anchor=anchor, size=size,
                  seed=args.seed, jobs=args.jobs)
+    summary = {ref: {k: res["summary"][k] for k in ("part_acc_strict", "part_acc", "rot_geodesic_rmse_deg", "solved")}
+               for ref, res in scores.items()}
+    placed = sum(bool(scores["given pose"]["fragments"][n]["placed"]) for n in meshes)
+    run.write(args.json, figures={"fragments": len(meshes), "placed": placed, "run_seconds": elapsed,
+                                  "gap": report["summary"].get("gap"), "scores": summary,
+                                  "closed_reference_rms": {"given": rms_given, "fitted": rms_fit}},
+              tables=[table(f"{args.folder.name}: {placed} of {len(meshes)} placed, `run` {elapsed:.0f} s "
+                            f"(--jobs {args.jobs}, seed {args.seed})",
+                            ["scored against", "strict part acc", "BB part acc", "rotation RMSE deg", "solved"],
+                            [[ref, s["part_acc_strict"], s["part_acc"], s["rot_geodesic_rmse_deg"],
+                              "yes" if s["solved"] else "no"] for ref, s in summary.items()],
+                            ["", ".3f", ".3f", ".2f", ""])])
     return 0
 
 

@@ -25,19 +25,15 @@ D2: dist^2 = sdf^2 is smooth in the ball when r is below the reach, so a product
 Every result carries an error estimate: the difference from the same computation at
 about 2/3 of the nodes in every direction.
 
-    python benchmarks/reference.py        # validation against the sphere's closed forms
+    python -m benchmarks.accuracy.reference        # validation against the sphere's closed forms
 """
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 # ---------------------------------------------------------------------------------------
@@ -365,10 +361,11 @@ def vp_rays(torus: ImplicitTorus, p: np.ndarray, r: float, directions: np.ndarra
 
 
 def _validate() -> None:
-    from benchmarks.common import header
+    """Print the reference's own accuracy checks (this module run as a script)."""
+    from benchmarks.common import start
     from data_synth.shapes import torus_curvatures
 
-    header()
+    start()
     rng = np.random.default_rng(0)
     print("1. closed forms: lens volume vs piecewise-exact Gauss (V), D2 on a huge sphere vs the plane's 4 pi r^5/15")
     worst = 0.0

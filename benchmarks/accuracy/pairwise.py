@@ -1,7 +1,7 @@
 """Segmentation and pairwise registration on the bench set, beside Open3D's textbook pipeline.
 
-    python benchmarks/pairwise.py puzzles/bench                       # 2, 4, 8 pieces, seed 0, clean + noisy
-    python benchmarks/pairwise.py puzzles/bench --pieces 2,4,8,12,20 --seeds 0,1,2 --jobs 2
+    python -m benchmarks.accuracy.pairwise puzzles/bench                       # 2, 4, 8 pieces, seed 0, clean + noisy
+    python -m benchmarks.accuracy.pairwise puzzles/bench --pieces 2,4,8,12,20 --seeds 0,1,2 --jobs 2
 
 The bench set is built first if missing (python -m data_synth.make_sets bench --out DIR).
 Per puzzle:
@@ -23,16 +23,13 @@ skips the slowest part.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.common import add_selection, add_signature_radii, described, header, match_config, select  # noqa: E402
+from benchmarks.common import add_selection, add_signature_radii, described, match_config, select, start, table
 
 MIN_CONTACT = 0.05
 
@@ -121,11 +118,11 @@ def main() -> int:
     add_selection(parser, pieces="2,4,8")
     parser.add_argument("--no-baseline", action="store_true")
     parser.add_argument("--cached", action="store_true",
-                        help="descriptors from the cache beside the set (benchmarks/segmentation.py fills it): "
+                        help="descriptors from the cache beside the set (benchmarks.accuracy.segmentation fills it): "
                         "same results, the preparation time then leaves the descriptors out")
     add_signature_radii(parser)
     args = parser.parse_args()
-    header()
+    run = start()
     specs = select(args)
     paths = [str(args.root / s.name / "ground_truth.json") for s in specs]
     print(f"{len(specs)} puzzles; pairs touching with contact >= {MIN_CONTACT:.0%} of the smaller fragment's "
@@ -145,6 +142,7 @@ def main() -> int:
         for g in ("all", "noisy" if spec.noise else "clean"):
             groups[g].append(r)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")
+    summary = []
     for g, rs in groups.items():
         if not rs:
             continue
@@ -152,6 +150,13 @@ def main() -> int:
         touch = [x for x in rows if x["share"] >= MIN_CONTACT]
         apart = [x for x in rows if x["share"] == 0.0]
         area_f1 = np.mean([r["f1"] for r in rs])
+        summary.append({"group": g, "puzzles": len(rs), "f1_mean": float(area_f1), "f1_min": min(r["f1"] for r in rs),
+                        "touching": len(touch), "ours_right": int(sum(x["ok"] for x in touch)),
+                        "ours_share": float(np.mean([x["ok"] for x in touch])) if touch else None,
+                        "ours_auc": auc([x["score"] for x in touch], [x["score"] for x in apart]),
+                        "baseline": not args.no_baseline,
+                        "fpfh_share": float(np.mean([x["base_ok"] for x in touch])) if touch else None,
+                        "fpfh_auc": auc([x["base_score"] for x in touch], [x["base_score"] for x in apart])})
         print(f"{g:>5s}: {len(rs)} puzzles; segmentation F1 mean {area_f1:.3f} (min {min(r['f1'] for r in rs):.3f}); "
               f"touching pairs correct: ours {np.mean([x['ok'] for x in touch]):.3f}, "
               f"fpfh {np.mean([x['base_ok'] for x in touch]):.3f} of {len(touch)}; "
@@ -165,6 +170,39 @@ def main() -> int:
         rs = by_n[n]
         print(f"  {n:>3d} fragments ({n * (n - 1) // 2:>4d} pairs, ~{np.mean([r['faces'] for r in rs]):.0f} faces each): "
               f"prepare {np.mean([r['t_prepare'] for r in rs]):6.1f} s, pairs {np.mean([r['t_pairs'] for r in rs]):6.1f} s")
+    per_puzzle = []
+    for r in results:
+        touch = [x for x in r["rows"] if x["share"] >= MIN_CONTACT]
+        apart = [x for x in r["rows"] if x["share"] == 0.0]
+        per_puzzle.append({"name": r["name"], "fragments": r["fragments"], "f1": r["f1"], "touching": len(touch),
+                           "ours_right": int(sum(x["ok"] for x in touch)),
+                           "fpfh_right": int(sum(x["base_ok"] for x in touch)),
+                           "ours_auc": auc([x["score"] for x in touch], [x["score"] for x in apart]),
+                           "t_prepare_per_fragment": r["t_prepare"] / r["fragments"],
+                           "t_per_pair": r["t_pairs"] / max(1, len(r["rows"]))})
+    cols = ["puzzles", "n", "segmentation F1", "F1 min", "touching pairs", "right (ours)", "AUC (ours)"]
+    fmts = ["", "d", ".3f", ".3f", "d", ".3f", ".3f"]
+    if not args.no_baseline:
+        cols, fmts = cols + ["right (FPFH)", "AUC (FPFH)"], fmts + [".3f", ".3f"]
+    tables = [
+        table(f"Pairs touching over >= {MIN_CONTACT:.0%} of the smaller surface, right within 2 deg and 1 % of the "
+              "diagonal; ROC AUC of the best score, touching against apart (targets: F1 >= 0.95, right >= 0.95, "
+              "AUC >= 0.98)", cols,
+              [[x["group"], x["puzzles"], x["f1_mean"], x["f1_min"], x["touching"], x["ours_share"], x["ours_auc"]]
+               + ([x["fpfh_share"], x["fpfh_auc"]] if x["baseline"] else []) for x in summary], fmts),
+        table("Per puzzle", ["puzzle", "fragments", "F1", "touching", "right (ours)", "AUC (ours)",
+                             "prepare s / fragment", "s / pair"],
+              [[x["name"], x["fragments"], x["f1"], x["touching"], x["ours_right"], x["ours_auc"],
+                x["t_prepare_per_fragment"], x["t_per_pair"]] for x in per_puzzle],
+              ["", "d", ".3f", "d", "d", ".3f", ".2f", ".2f"]),
+    ]
+    headline = [(f"Pairs right ({x['group']}, {x['touching']} touching pairs of {x['puzzles']} {args.set} puzzles of "
+                  f"{args.pieces} pieces)",
+                 f"{x['ours_share']:.3f} (target >= 0.95)"
+                 + (f"; ROC AUC {x['ours_auc']:.3f} (target >= 0.98)" if np.isfinite(x["ours_auc"]) else ""))
+                for x in summary if x["group"] != "all" and x["ours_share"] is not None]
+    run.write(args.json, figures={"summary": summary, "puzzles": per_puzzle, "min_contact": MIN_CONTACT},
+              tables=tables, headline=headline)
     return 0
 
 

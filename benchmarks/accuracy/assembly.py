@@ -1,7 +1,7 @@
 """Whole-object assembly (`reassemble run`) on the bench set, beside Open3D's textbook pipeline.
 
-    python benchmarks/assembly.py puzzles/bench                    # 2-20 pieces, seed 0, clean + noisy
-    python benchmarks/assembly.py puzzles/bench --pieces 2,4,8 --seeds 0,1,2 --no-baseline --jobs 2
+    python -m benchmarks.accuracy.assembly puzzles/bench                    # 2-20 pieces, seed 0, clean + noisy
+    python -m benchmarks.accuracy.assembly puzzles/bench --pieces 2,4,8 --seeds 0,1,2 --no-baseline --jobs 2
 
 The bench set is built first if missing (python -m data_synth.make_sets bench --out DIR).
 Per puzzle, `run_to_folder` (the code behind `reassemble run`, one process per puzzle)
@@ -19,7 +19,6 @@ size; 0: touching) and the Taubin iterations of the copies it matched on (0: non
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -27,9 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.common import add_selection, add_signature_radii, header, match_config, select  # noqa: E402
+from benchmarks.common import add_selection, add_signature_radii, match_config, select, start, table
 
 ALIGN = "anchor_largest"
 
@@ -82,22 +79,32 @@ def report_puzzle(r: dict) -> None:
           flush=True)
 
 
-def summarize(label: str, rs: list[dict]) -> None:
-    def block(key, errs_key, rs=rs):
-        strict = np.mean([r[key]["part_acc_strict"] for r in rs])
-        bb = np.mean([r[key]["part_acc"] for r in rs])
-        rot = np.mean([r[key]["rot_geodesic_rmse_deg"] for r in rs])
+def summarize(label: str, rs: list[dict]) -> list[dict]:
+    """Print and return the means over ``rs`` (ours, and the baseline where it ran)."""
+    def block(method, key, errs_key, rs=rs):
         errs = np.concatenate([r[errs_key] for r in rs])
-        solved = np.mean([r[key]["solved"] for r in rs])
-        return (f"strict part acc {strict:.3f}, BB part acc {bb:.3f}, geodesic rot RMSE {rot:.2f} deg "
-                f"(mean over puzzles; over all fragments {np.sqrt(np.mean(errs ** 2)):.2f}, median "
-                f"{np.median(errs):.3f}), solved {solved:.3f}")
+        return {"group": label, "method": method, "puzzles": len(rs),
+                "strict": float(np.mean([r[key]["part_acc_strict"] for r in rs])),
+                "part_acc": float(np.mean([r[key]["part_acc"] for r in rs])),
+                "rot_rmse_deg": float(np.mean([r[key]["rot_geodesic_rmse_deg"] for r in rs])),
+                "rot_rmse_all_deg": float(np.sqrt(np.mean(errs ** 2))), "rot_median_deg": float(np.median(errs)),
+                "solved": float(np.mean([r[key]["solved"] for r in rs])),
+                "solved_count": int(sum(bool(r[key]["solved"]) for r in rs))}
 
-    print(f"{label} ({len(rs)} puzzles) ours: {block('ours', 'rot_errors')}")
+    def say(b, what):
+        print(f"{label} ({b['puzzles']} puzzles{what}) {b['method']}: strict part acc {b['strict']:.3f}, BB part acc "
+              f"{b['part_acc']:.3f}, geodesic rot RMSE {b['rot_rmse_deg']:.2f} deg (mean over puzzles; over all "
+              f"fragments {b['rot_rmse_all_deg']:.2f}, median {b['rot_median_deg']:.3f}), solved {b['solved']:.3f}")
+
+    out = [block("ours", "ours", "rot_errors")]
+    say(out[-1], "")
     with_base = [r for r in rs if "base" in r]
     if with_base:
-        print(f"{label} ({len(with_base)} puzzles with the baseline) ours: {block('ours', 'rot_errors', with_base)}")
-        print(f"{label} ({len(with_base)} puzzles with the baseline) fpfh: {block('base', 'base_rot_errors', with_base)}")
+        for method, key, errs in (("ours (baseline's puzzles)", "ours", "rot_errors"),
+                                  ("fpfh", "base", "base_rot_errors")):
+            out.append(block(method, key, errs, with_base))
+            say(out[-1], " with the baseline")
+    return out
 
 
 def main() -> int:
@@ -109,7 +116,7 @@ def main() -> int:
                         help="run the baseline on puzzles of at most this many pieces (default 12: it takes "
                         "about 300 s on a 20-piece puzzle)")
     args = parser.parse_args()
-    header()
+    run = start()
     specs = select(args)
     # the biggest first, so the pool is not left waiting on one 20-piece puzzle at the end
     specs.sort(key=lambda s: -s.pieces)
@@ -129,23 +136,52 @@ def main() -> int:
     groups: dict[str, list] = {"clean": [], "noisy": []}
     for spec, r in zip(specs, results):
         groups["noisy" if spec.noise else "clean"].append(r)
+    summary = []
     for label, rs in groups.items():
         if rs:
-            summarize(label, rs)
+            summary += summarize(label, rs)
     for label, rs in groups.items():
         for cap in (8, 12):
             small = [r for r in rs if r["fragments"] <= cap]
             if small and len(small) < len(rs):
-                summarize(f"{label} <= {cap} pieces", small)
+                summary += summarize(f"{label} <= {cap} pieces", small)
     print("\ntime of `run` (one process) against fragment count, mean over puzzles:")
     by_n: dict[int, list] = {}
     for r in results:
         by_n.setdefault(r["fragments"], []).append(r)
+    times = []
     for n in sorted(by_n):
         rs = by_n[n]
-        t = {k: np.mean([r["timings"][k] for r in rs]) for k in ("prepare", "pairs", "assembly")}
-        print(f"  {n:>3d} fragments: {np.mean([r['time'] for r in rs]):6.1f} s (prepare {t['prepare']:.1f}, "
+        t = {k: float(np.mean([r["timings"][k] for r in rs])) for k in ("prepare", "pairs", "assembly")}
+        times.append({"fragments": n, "puzzles": len(rs), "run": float(np.mean([r["time"] for r in rs])), **t})
+        print(f"  {n:>3d} fragments: {times[-1]['run']:6.1f} s (prepare {t['prepare']:.1f}, "
               f"pairs {t['pairs']:.1f}, assembly {t['assembly']:.1f})")
+    puzzles = [{"name": r["name"], "fragments": r["fragments"], "placed": r["placed"],
+                "strict": r["ours"]["part_acc_strict"], "part_acc": r["ours"]["part_acc"],
+                "rot_rmse_deg": r["ours"]["rot_geodesic_rmse_deg"], "solved": bool(r["ours"]["solved"]),
+                "time": r["time"], "timings": r["timings"], "gap": r["gap"], "smoothing": r["smoothing"],
+                **({"fpfh": r["base"]} if "base" in r else {})} for r in results]
+    tables = [
+        table("Means over puzzles, scored as `reassemble eval` does, anchored on the largest placed fragment "
+              "(strict: mean chamfer < 1 % of the diagonal; targets: strict >= 0.95 clean, >= 0.90 noisy; "
+              "solved >= 0.85)",
+              ["puzzles", "method", "n", "strict part acc", "Breaking Bad part acc", "rotation RMSE deg", "solved",
+               "solved (count)"],
+              [[x["group"], x["method"], x["puzzles"], x["strict"], x["part_acc"], x["rot_rmse_deg"], x["solved"],
+                x["solved_count"]] for x in summary], ["", "", "d", ".3f", ".3f", ".2f", ".3f", "d"]),
+        table("Time of `run` in one process, mean over puzzles (s)",
+              ["fragments", "puzzles", "run", "prepare", "pairs", "assembly"],
+              [[x["fragments"], x["puzzles"], x["run"], x["prepare"], x["pairs"], x["assembly"]] for x in times],
+              ["d", "d", ".1f", ".1f", ".1f", ".1f"]),
+        table("Per puzzle", ["puzzle", "fragments", "placed", "strict", "rotation RMSE deg", "solved", "time s", "gap"],
+              [[x["name"], x["fragments"], x["placed"], x["strict"], x["rot_rmse_deg"], "yes" if x["solved"] else "no",
+                x["time"], x["gap"]] for x in puzzles], ["", "d", "d", ".3f", ".2f", "", ".1f", ".4f"]),
+    ]
+    headline = [(f"Assembly on the {args.set} set, {x['group']} ({x['puzzles']} puzzles): strict part accuracy, solved",
+                 f"{x['strict']:.3f}, {x['solved_count']} of {x['puzzles']}")
+                for x in summary if x["method"] == "ours" and x["group"] in ("clean", "noisy")]
+    run.write(args.json, figures={"summary": summary, "times": times, "puzzles": puzzles}, tables=tables,
+              headline=headline)
     return 0
 
 

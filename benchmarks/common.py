@@ -62,13 +62,14 @@ def machine_line(m: dict | None = None) -> str:
 
 
 def git_state() -> dict:
-    """The commit of the working tree and whether tracked files differ from it."""
+    """The commit of the working tree and whether tracked files (other than the records) differ from it."""
     def git(*args):
         return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True,
                               check=True).stdout.strip()
     try:
         commit = git("rev-parse", "HEAD")
-        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+        # the records themselves do not change what is measured
+        dirty = bool(git("status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)benchmarks/results"))
     except (OSError, subprocess.CalledProcessError):
         return {"commit": None, "dirty": None}
     return {"commit": commit, "dirty": dirty}

@@ -68,6 +68,7 @@ def test_one_keypoint_pair_recovers_a_known_motion(bowl, rng):
     assert np.linalg.norm(T[:3, :3] @ centre + T[:3, 3] - T_true[:3, :3] @ centre - T_true[:3, 3]) < 0.005 * size
 
 
+@pytest.mark.slow
 def test_thin_walls_can_be_turned_off(bowl):
     """--thin-walls no: the same sherds go down the solids' path (no strip frames)."""
     from reassemble.pipeline import Config

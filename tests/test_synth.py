@@ -27,6 +27,7 @@ def _original(name):
     "mesh,pieces,seed",
     [("spot_low_resolution", 4, 1), ("torus", 5, 2), ("angle_block", 3, 0), ("featuretype", 6, 4)],
 )
+@pytest.mark.slow
 def test_puzzle_is_exact(tmp_path, mesh, pieces, seed):
     out = tmp_path / "p"
     break_to_folder(mesh, out, params=BreakParams(pieces=pieces), seed=seed)

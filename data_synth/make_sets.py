@@ -33,7 +33,7 @@ def build_one(spec: PuzzleSpec, root: Path, force: bool = False) -> dict:
         saved = json.loads(gt.read_text())
         # every break parameter, not only the name's: a set made by an older generator
         # (other defaults, or a parameter since added) is not the set the figures are for
-        if saved.get("seed") == spec.seed and saved.get("parameters") == dataclasses.asdict(params):
+        if saved.get("seed") == spec.seed and saved.get("parameters") == params.to_dict():
             return {"name": spec.name, "seconds": 0.0, "cached": True}
     t0 = time.perf_counter()
     break_to_folder(spec.mesh, out, params=params, seed=spec.seed, force=True)

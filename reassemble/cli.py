@@ -41,6 +41,7 @@ def _cmd_break(args: argparse.Namespace) -> int:
     params = BreakParams(
         pieces=args.pieces, roughness=args.roughness, cut_edge=args.cut_edge, noise=args.noise,
         chips=args.chips, chip_size=args.chip_size, decimate=args.decimate, gap=args.gap, scale=args.scale,
+        style=args.style, keep_cell_faces=args.keep_cell_faces,
     )
     out = break_to_folder(args.mesh, args.out, params=params, seed=args.seed, force=args.force,
                           fill_holes=args.fill_holes)
@@ -275,8 +276,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_int_at_least(0), default=0, help="random seed (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
     p.add_argument("--force", action="store_true", help="replace an existing output folder")
-    p.add_argument("--roughness", type=_number, default=0.08,
-                   help="RMS height of the cut surfaces / radius of the piece cut (default 0.08)")
+    p.add_argument("--style", choices=("fractal", "smooth", "cells", "mixed"), default="fractal",
+                   help="cut surfaces: fractal (rough at every scale), smooth (long undulations), cells "
+                   "(Voronoi-like, near-planar faces), mixed (each cut its own) (default fractal)")
+    p.add_argument("--roughness", type=_number, default=None,
+                   help="RMS height of the cut surfaces / radius of the piece cut, 0 = planes "
+                   "(default 0.08 fractal, 0.05 smooth, 0.02 cells; mixed draws its own)")
+    p.add_argument("--keep-cell-faces", action="store_true",
+                   help="write each fragment as a union of cells keeping the faces between them, "
+                   "twice each, labelled 2 = interior (Breaking Bad's early layout)")
     p.add_argument("--cut-edge", type=_number, default=0.008,
                    help="edge length of cut surfaces / object diagonal (default 0.008)")
     p.add_argument("--noise", type=_number, default=0.0,

@@ -108,7 +108,7 @@ def break_to_folder(
                 "confidence": 1.0,
                 "file": f"fragments/{fr.name}.ply",
                 "n_faces": int(len(faces)),
-                "n_fracture_faces": int(lab.sum()),
+                "n_fracture_faces": int((lab == 1).sum()),
                 "area": _round(areas.sum()),
                 "fracture_area": _round(areas[lab == 1].sum()),
             }
@@ -122,7 +122,7 @@ def break_to_folder(
                 "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
             },
             "seed": seed,
-            "parameters": dataclasses.asdict(params),
+            "parameters": params.to_dict(),
             "object": {
                 "bbox_min": [_round(x) for x in puzzle.bbox_min],
                 "bbox_max": [_round(x) for x in puzzle.bbox_max],
@@ -130,7 +130,7 @@ def break_to_folder(
                 "volume": _round(puzzle.volume),
                 "area": _round(puzzle.area),
             },
-            "labels": {"file": "labels.npz", "values": {"0": "original surface", "1": "fracture"}},
+            "labels": {"file": "labels.npz", "values": params.label_names()},
             "fragments": fragments_json,
             "contacts": [
                 {"fragments": [c.a, c.b], "area": _round(c.area)} for c in puzzle.contacts

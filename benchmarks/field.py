@@ -251,12 +251,18 @@ def main(argv: list[str] | None = None) -> int:
                     or (args.meshes and spec.mesh not in args.meshes.split(","))):
                 continue
             todo.append((half, spec, root / spec.name / "ground_truth.json"))
+    not_generated: list[dict] = []
     for half in halves:  # the selected puzzles not built yet
         missing = [s for h, s, gt in todo if h == half and not gt.is_file()]
         if missing:
             print(f"building {len(missing)} puzzles of {HALVES[half]} in {args.sets / HALVES[half]} ...", flush=True)
-            build_specs(missing, args.sets / HALVES[half], set_name=HALVES[half], jobs=max(1, args.jobs),
-                        shared=args.shared)
+            built = build_specs(missing, args.sets / HALVES[half], set_name=HALVES[half], jobs=max(1, args.jobs),
+                                shared=args.shared, keep_going=True)
+            for b in built:
+                if "error" in b:
+                    print(f"  not generated: {b['error']}", flush=True)
+                    not_generated.append({"half": half, "name": b["name"], "error": b["error"]})
+    todo = [t for t in todo if t[2].is_file()]
 
     done: dict[tuple[str, str], dict] = {}
     if args.resume and args.out.is_file():
@@ -274,7 +280,8 @@ def main(argv: list[str] | None = None) -> int:
         figs = {h: figures([r for r in rows if r["half"] == h]) for h in halves if any(r["half"] == h for r in rows)}
         write_json(args.out, {"benchmark": "field", "machine": machine_line(),
                               "command": "python -m benchmarks.field " + " ".join(sys.argv[1:] if argv is None else argv),
-                              "commit": commit, "figures": figs, "puzzles": rows})
+                              "commit": commit, "figures": figs, "puzzles": rows,
+                              "not_generated": not_generated})
         return figs
 
     t0 = time.perf_counter()

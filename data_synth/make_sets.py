@@ -111,9 +111,20 @@ def prepare_source(mesh: str, root: Path, shared: Path) -> Path:
     return out
 
 
+def _build_or_note(spec: PuzzleSpec, root: Path, force: bool, mesh) -> dict:
+    try:
+        return build_one(spec, root, force, mesh)
+    except ReassembleError as exc:
+        return {"name": spec.name, "seconds": 0.0, "cached": False, "error": str(exc)}
+
+
 def build_specs(specs: list[PuzzleSpec], root: Path, *, set_name: str, jobs: int = 1, force: bool = False,
-                shared: Path = DEFAULT_SHARED) -> list[dict]:
-    """Build these puzzles of the set ``set_name`` into ``root`` (kept where built already)."""
+                shared: Path = DEFAULT_SHARED, keep_going: bool = False) -> list[dict]:
+    """Build these puzzles of the set ``set_name`` into ``root`` (kept where built already).
+
+    ``keep_going``: a puzzle the generator cannot make gets an ``error`` entry instead of
+    stopping the build.
+    """
     root.mkdir(parents=True, exist_ok=True)
     meshes = [None] * len(specs)
     if set_name.startswith("field"):
@@ -121,11 +132,12 @@ def build_specs(specs: list[PuzzleSpec], root: Path, *, set_name: str, jobs: int
         meshes = [sources[s.mesh] for s in specs]
     order = sorted(range(len(specs)), key=lambda k: -specs[k].pieces)  # the longest first
     args = ([specs[k] for k in order], [root] * len(specs), [force] * len(specs), [meshes[k] for k in order])
+    build = _build_or_note if keep_going else build_one
     if jobs > 1:
         with ProcessPoolExecutor(jobs) as pool:
-            done = list(pool.map(build_one, *args))
+            done = list(pool.map(build, *args))
     else:
-        done = list(map(build_one, *args))
+        done = list(map(build, *args))
     results = [None] * len(specs)
     for k, r in zip(order, done):
         results[k] = r

@@ -145,3 +145,51 @@ def check_puzzle(puzzle: PuzzleFiles, original_vertices: np.ndarray, original_fa
         "original_area_in_contact": orig_in_contact / max(orig_area, 1e-300),
         "interior_area_unpaired": unpaired / interior_area if interior_area else 0.0,
     }
+
+
+LIMITS = {"volume_rel_error": 1e-5, "max_gap_over_diag": 1e-6, "original_off_surface_over_diag": 1e-6,
+          "fracture_area_on_original": 1e-4, "original_area_in_contact": 1e-4, "interior_area_unpaired": 1e-6}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Check every clean puzzle of a built set folder against the mesh it was broken from
+    (``<set>/_sources/<mesh>`` where the set has one, else the bundled mesh)."""
+    import argparse
+    import json
+    from pathlib import Path
+
+    from reassemble.files import load_mesh, resolve_mesh_path
+    from reassemble.pipeline import read_puzzle
+
+    parser = argparse.ArgumentParser(prog="python -m data_synth.verify", description=main.__doc__)
+    parser.add_argument("root", type=Path, help="a set folder built by data_synth.make_sets")
+    args = parser.parse_args(argv)
+    worst: dict[str, dict[str, float]] = {}
+    failed = 0
+    sources: dict[str, tuple] = {}
+    for gt_path in sorted(args.root.glob("*/ground_truth.json")):
+        gt = json.loads(gt_path.read_text())
+        if gt["parameters"]["noise"] > 0:  # noise moves vertices off the exact surfaces
+            continue
+        name = gt["source"]["mesh"]
+        if name not in sources:
+            path = args.root / "_sources" / name
+            m = load_mesh(path if path.is_file() else resolve_mesh_path(Path(name).stem))
+            sources[name] = (m.vertices, m.faces)
+        checks = check_puzzle(read_puzzle(gt_path), *sources[name])
+        style = gt["parameters"].get("style", "fractal")
+        bad = [k for k, v in checks.items() if v > LIMITS[k]]
+        failed += bool(bad)
+        for k, v in checks.items():
+            worst.setdefault(style, {})[k] = max(worst.get(style, {}).get(k, 0.0), v)
+        print(f"{gt_path.parent.name:<44s} " + " ".join(f"{v:.1e}" for v in checks.values())
+              + (f"  OVER: {', '.join(bad)}" if bad else ""), flush=True)
+    print("\nworst per style (limits: " + ", ".join(f"{k} {v:g}" for k, v in LIMITS.items()) + ")")
+    for style, w in sorted(worst.items()):
+        print(f"  {style:<8s} " + ", ".join(f"{k} {v:.1e}" for k, v in w.items()))
+    print(f"{failed} puzzle(s) over a limit")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -682,7 +682,20 @@ def break_mesh(
     -------
     Puzzle
         Fragments in random poses, sorted by name, with ``T_world_fragment`` mapping each
-        back to the (scaled) input mesh's frame.
+        back to the (scaled) input mesh's frame. ``labels`` are ``ORIGINAL``, ``FRACTURE``
+        and, with ``keep_cell_faces``, ``INTERIOR``; ``stats["cut_styles"]`` lists the
+        (style, roughness) of every cut.
+
+    Notes
+    -----
+    The ``cells`` partition is Voronoi fracture, as Blender's Cell Fracture add-on makes it
+    and with the near-planar faces of the Breaking Bad dataset's pieces (Sellán et al.,
+    "Breaking Bad: A Dataset for Geometric Fracture and Reassembly", NeurIPS 2022): every
+    cell is bounded by the bisectors of its seed and its neighbours', so pieces meet along
+    edges and at corners.
+    Each cell is cut from what is left, so the cells partition the solid exactly even where
+    the bisectors undulate, and every cut face is a piece of one cutter: it is labelled
+    fracture and its mate lies on the same surface.
     """
     import manifold3d as mf
 

@@ -16,7 +16,7 @@ Time per fragment: the run's wall-clock and CPU time over its fragments. ``--bas
 also runs Open3D's textbook FPFH + RANSAC + ICP (``reassemble.baseline``) on the puzzles
 of at most ``--baseline-max-pieces``. Figures go to ``benchmarks/results/field.json``
 (rewritten after every puzzle, so an interrupted run keeps what it measured;
-``--resume`` skips puzzles already in it, for this commit).
+``--resume`` skips puzzles already in it; every puzzle's row names the commit it ran at).
 """
 
 from __future__ import annotations
@@ -267,8 +267,7 @@ def main(argv: list[str] | None = None) -> int:
     done: dict[tuple[str, str], dict] = {}
     if args.resume and args.out.is_file():
         saved = json.loads(args.out.read_text())
-        if saved.get("commit") == commit:
-            done = {(r["half"], r["name"]): r for r in saved.get("puzzles", [])}
+        done = {(r["half"], r["name"]): r for r in saved.get("puzzles", [])}
     rows = [done[(h, s.name)] for h, s, _ in todo if (h, s.name) in done]
     todo = [t for t in todo if (t[0], t[1].name) not in done]
     todo.sort(key=lambda t: (halves.index(t[0]), t[1].pieces))  # validation first, small puzzles first
@@ -291,7 +290,7 @@ def main(argv: list[str] | None = None) -> int:
                    for half, spec, gt in todo]
         for half, spec, fut in futures:
             r = fut.result()
-            r.update(half=half, mesh=spec.mesh, kind=FIELD_MESHES[spec.mesh].kind, style=style_label(spec),
+            r.update(half=half, commit=commit, mesh=spec.mesh, kind=FIELD_MESHES[spec.mesh].kind, style=style_label(spec),
                      pieces=spec.pieces, noise=spec.noise)
             rows.append(r)
             base = f"  {r['baseline']['part_acc_strict']:>11.3f}" if "baseline" in r else ""

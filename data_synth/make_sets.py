@@ -144,14 +144,19 @@ def build_specs(specs: list[PuzzleSpec], root: Path, *, set_name: str, jobs: int
     return results
 
 
-def build_set(name: str, root: Path, *, jobs: int = 1, force: bool = False, shared: Path = DEFAULT_SHARED) -> list[dict]:
+def build_set(name: str, root: Path, *, jobs: int = 1, force: bool = False, shared: Path = DEFAULT_SHARED,
+              keep_going: bool = False) -> list[dict]:
+    """Build the set ``name`` into ``root`` and write its ``index.json`` (with
+    ``keep_going``, puzzles the generator could not make are listed apart, not indexed)."""
     specs = SETS[name]()
-    results = build_specs(specs, root, set_name=name, jobs=jobs, force=force, shared=shared)
+    results = build_specs(specs, root, set_name=name, jobs=jobs, force=force, shared=shared, keep_going=keep_going)
+    failed = {r["name"]: r["error"] for r in results if "error" in r}
     index = [
         dict(dataclasses.asdict(s), name=s.name, ground_truth=f"{s.name}/ground_truth.json")
-        for s in specs
+        for s in specs if s.name not in failed
     ]
-    write_json(root / "index.json", {"set": name, "puzzles": index})
+    extra = {"not_generated": failed} if failed else {}
+    write_json(root / "index.json", {"set": name, "puzzles": index, **extra})
     return results
 
 
@@ -167,14 +172,18 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     try:
-        results = build_set(args.set, args.out, jobs=args.jobs, force=args.force, shared=args.shared)
+        results = build_set(args.set, args.out, jobs=args.jobs, force=args.force, shared=args.shared,
+                            keep_going=True)
     except ReassembleError as exc:
         print(f"make_sets: error: {exc}", file=sys.stderr)
         return 2
-    built = [r for r in results if not r["cached"]]
-    print(f"{args.set}: {len(results)} puzzles in {args.out}/ ({len(built)} built, "
-          f"{len(results) - len(built)} kept) in {time.perf_counter() - t0:.1f} s")
-    return 0
+    failed = [r for r in results if "error" in r]
+    built = [r for r in results if not r["cached"] and "error" not in r]
+    print(f"{args.set}: {len(results) - len(failed)} puzzles in {args.out}/ ({len(built)} built, "
+          f"{len(results) - len(built) - len(failed)} kept) in {time.perf_counter() - t0:.1f} s")
+    for r in failed:
+        print(f"make_sets: error: not generated: {r['error']}", file=sys.stderr)
+    return 2 if failed else 0
 
 
 if __name__ == "__main__":

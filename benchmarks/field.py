@@ -3,6 +3,7 @@ the validation half first, the tuning half beside it.
 
     python -m benchmarks.field --sets puzzles --shared ../shared --jobs 1
     python -m benchmarks.field --sets puzzles --halves validation --max-pieces 4 --clean-only --resume
+    python -m benchmarks.field --report          # the tables of benchmarks/results/field.json
 
 The sets (``data_synth.sets``: field-validation, field-tuning; split by mesh) live in
 ``SETS/field-validation`` and ``SETS/field-tuning``; the selected puzzles not there yet are
@@ -231,8 +232,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once (each run uses one process)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "field.json")
-    parser.add_argument("--resume", action="store_true", help="keep the puzzles already in --out (same commit)")
+    parser.add_argument("--resume", action="store_true", help="keep the puzzles already in --out")
+    parser.add_argument("--report", action="store_true", help="only print the tables of --out, run nothing")
     args = parser.parse_args(argv)
+    if args.report:
+        saved = json.loads(args.out.read_text())
+        print(f"{args.out}: {saved['machine']}\ncommand: {saved['command']}\ncommit: {saved['commit']}; "
+              f"{len(saved['puzzles'])} puzzles")
+        print_tables(saved["figures"])
+        return 0
     header()
     commit = _commit()
     halves = [h.strip() for h in args.halves.split(",") if h.strip()]

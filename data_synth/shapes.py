@@ -142,15 +142,29 @@ def vase_mesh(*, wall: float = 0.05, segments: int = 96, rows: int = 48) -> tupl
     The sherd shape the synthetic puzzles otherwise lack (every bench mesh is a solid).
     ``segments`` around, ``rows`` up the profile.
     """
+    return _vessel([0.0, 0.3, 0.9, 1.5, 1.8, 2.0], [0.42, 0.68, 0.80, 0.52, 0.36, 0.44],
+                   wall=wall, segments=segments, rows=rows)
+
+
+def bowl_mesh(*, wall: float = 0.04, segments: int = 96, rows: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """A thin-walled open bowl (about +z, 0.7 high): flat base of radius 0.3 widening to a
+    rim of radius 1, walls ``wall`` thick. A second sherd shape, unlike the pot: shallow,
+    no neck, wide open, so its fragments are gently curved plates."""
+    return _vessel([0.0, 0.1, 0.3, 0.55, 0.7], [0.30, 0.50, 0.78, 0.95, 1.0],
+                   wall=wall, segments=segments, rows=rows)
+
+
+def _vessel(z_ctrl, r_ctrl, *, wall: float, segments: int, rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """Closed solid of revolution: the outer profile r(z) through the control points, the
+    inner one ``wall`` in from it, a flat base ``wall`` thick, open at the top."""
     import manifold3d as m3
     from scipy.interpolate import PchipInterpolator
 
-    z_ctrl = [0.0, 0.3, 0.9, 1.5, 1.8, 2.0]
-    r_ctrl = [0.42, 0.68, 0.80, 0.52, 0.36, 0.44]
+    height = z_ctrl[-1]
     radius = PchipInterpolator(z_ctrl, r_ctrl)
-    z = np.linspace(0.0, 2.0, rows)
+    z = np.linspace(0.0, height, rows)
     outer = np.column_stack([radius(z), z])
-    zi = np.linspace(2.0, wall, rows)
+    zi = np.linspace(height, wall, rows)
     inner = np.column_stack([radius(zi) - wall, zi])  # horizontal offset: about the wall's thickness
     profile = np.vstack([[[0.0, 0.0]], outer, inner, [[0.0, wall]]])
     solid = m3.Manifold.revolve(m3.CrossSection([profile]), circular_segments=segments)

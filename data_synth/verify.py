@@ -1,11 +1,12 @@
 """Checks that a synthetic puzzle is what it claims: closed fragments, conserved volume,
-zero gaps when put back, and labels that cover exactly the cut faces."""
+zero gaps when put back, and labels that cover exactly the cut faces (and, for fragments
+written as unions of cells, interior faces that come in opposite pairs)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from reassemble.geometry import face_areas, make_scene, signed_volume, transform_points
+from reassemble.geometry import face_areas, face_normals, make_scene, signed_volume, transform_points
 from reassemble.pipeline import PuzzleFiles
 
 
@@ -75,6 +76,9 @@ def check_puzzle(puzzle: PuzzleFiles, original_vertices: np.ndarray, original_fa
         fracture_area_on_original : share of fracture area in faces lying wholly (vertices
             and centroid) on the original surface (should be ~0)
         original_area_in_contact : share of original-surface area touching another fragment
+        interior_area_unpaired : share of interior-face area (label 2) whose centroid is not
+            on another interior face of the same fragment facing the other way (should be 0;
+            0 when there are no interior faces)
     """
     gt = puzzle.ground_truth
     scale = gt["parameters"]["scale"]
@@ -94,6 +98,7 @@ def check_puzzle(puzzle: PuzzleFiles, original_vertices: np.ndarray, original_fa
     off_surface = 0.0
     frac_on_orig = frac_area = 0.0
     orig_in_contact = orig_area = 0.0
+    unpaired = interior_area = 0.0
     for name, (v, f, lab) in world.items():
         areas = face_areas(v, f)
         centroids = v[f].mean(axis=1)
@@ -111,15 +116,80 @@ def check_puzzle(puzzle: PuzzleFiles, original_vertices: np.ndarray, original_fa
             wholly = on[f[frac]].all(axis=1) & (d_orig < tol)
             frac_on_orig += float(areas[frac][wholly].sum())
             frac_area += float(areas[frac].sum())
-        if (~frac).any():
-            used = np.unique(f[~frac])
+        orig = lab == 0
+        if orig.any():
+            used = np.unique(f[orig])
             off_surface = max(off_surface, float(original_scene.distance(v[used]).max()))
-            orig_in_contact += float(areas[~frac][d_other[~frac] < tol].sum())
-            orig_area += float(areas[~frac].sum())
+            orig_in_contact += float(areas[orig][d_other[orig] < tol].sum())
+            orig_area += float(areas[orig].sum())
+        inner = np.flatnonzero(lab == 2)
+        if len(inner):
+            normals = face_normals(v, f)
+            # each interior face against the interior faces of the other orientation
+            for sign in (1.0, -1.0):
+                side = inner[normals[inner] @ np.array([0.577, 0.578, 0.577]) * sign > 0]
+                other = inner[normals[inner] @ np.array([0.577, 0.578, 0.577]) * sign <= 0]
+                if len(side) == 0:
+                    continue
+                if len(other) == 0:
+                    unpaired += float(areas[side].sum())
+                    continue
+                d = _Surface(v, f[other], exact_below=tol).distance(centroids[side])
+                unpaired += float(areas[side][d > tol].sum())
+            interior_area += float(areas[inner].sum())
     return {
         "volume_rel_error": abs(total_volume - original_volume) / original_volume,
         "max_gap_over_diag": max_gap / diag,
         "original_off_surface_over_diag": off_surface / diag,
         "fracture_area_on_original": frac_on_orig / max(frac_area, 1e-300),
         "original_area_in_contact": orig_in_contact / max(orig_area, 1e-300),
+        "interior_area_unpaired": unpaired / interior_area if interior_area else 0.0,
     }
+
+
+LIMITS = {"volume_rel_error": 1e-5, "max_gap_over_diag": 1e-6, "original_off_surface_over_diag": 1e-6,
+          "fracture_area_on_original": 1e-4, "original_area_in_contact": 1e-4, "interior_area_unpaired": 1e-6}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Check every clean puzzle of a built set folder against the mesh it was broken from
+    (``<set>/_sources/<mesh>`` where the set has one, else the bundled mesh)."""
+    import argparse
+    import json
+    from pathlib import Path
+
+    from reassemble.files import load_mesh, resolve_mesh_path
+    from reassemble.pipeline import read_puzzle
+
+    parser = argparse.ArgumentParser(prog="python -m data_synth.verify", description=main.__doc__)
+    parser.add_argument("root", type=Path, help="a set folder built by data_synth.make_sets")
+    args = parser.parse_args(argv)
+    worst: dict[str, dict[str, float]] = {}
+    failed = 0
+    sources: dict[str, tuple] = {}
+    for gt_path in sorted(args.root.glob("*/ground_truth.json")):
+        gt = json.loads(gt_path.read_text())
+        if gt["parameters"]["noise"] > 0:  # noise moves vertices off the exact surfaces
+            continue
+        name = gt["source"]["mesh"]
+        if name not in sources:
+            path = args.root / "_sources" / name
+            m = load_mesh(path if path.is_file() else resolve_mesh_path(Path(name).stem))
+            sources[name] = (m.vertices, m.faces)
+        checks = check_puzzle(read_puzzle(gt_path), *sources[name])
+        style = gt["parameters"].get("style", "fractal")
+        bad = [k for k, v in checks.items() if v > LIMITS[k]]
+        failed += bool(bad)
+        for k, v in checks.items():
+            worst.setdefault(style, {})[k] = max(worst.get(style, {}).get(k, 0.0), v)
+        print(f"{gt_path.parent.name:<44s} " + " ".join(f"{v:.1e}" for v in checks.values())
+              + (f"  OVER: {', '.join(bad)}" if bad else ""), flush=True)
+    print("\nworst per style (limits: " + ", ".join(f"{k} {v:g}" for k, v in LIMITS.items()) + ")")
+    for style, w in sorted(worst.items()):
+        print(f"  {style:<8s} " + ", ".join(f"{k} {v:.1e}" for k, v in w.items()))
+    print(f"{failed} puzzle(s) over a limit")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

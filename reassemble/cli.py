@@ -329,8 +329,14 @@ def _add_break(sub) -> None:
     _option(p, "--seed", "seed", type=_int_at_least(0), help="random seed")
     p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
     p.add_argument("--force", action="store_true", help="replace an existing output folder")
+    _option(p, "--style", "break.style", choices=("fractal", "smooth", "cells", "mixed"),
+            help="cut surfaces: fractal (rough at every scale), smooth (long undulations), cells "
+            "(Voronoi-like, near-planar faces), mixed (each cut its own)")
+    _option(p, "--keep-cell-faces", "break.keep_cell_faces", action="store_true", show=None,
+            help="write each fragment as a union of cells keeping the faces between them, twice each, "
+            "labelled 2 = interior (Breaking Bad's early layout)")
     for flag, help in (
-        ("--roughness", "RMS height of the cut surfaces / radius of the piece cut"),
+        ("--roughness", "RMS height of the cut surfaces / radius of the piece cut, 0 = planes (default 0.08 fractal, 0.05 smooth, 0.02 cells; mixed draws its own)"),
         ("--cut-edge", "edge length of cut surfaces / object diagonal"),
         ("--noise", "Gaussian vertex noise sigma / object diagonal"),
         ("--chips", "mean number of chips knocked off each fragment's break edge"),

@@ -65,7 +65,7 @@ def break_to_folder(
                 "confidence": 1.0,
                 "file": f"fragments/{fr.name}.ply",
                 "n_faces": int(len(faces)),
-                "n_fracture_faces": int(lab.sum()),
+                "n_fracture_faces": int((lab == 1).sum()),
                 "area": rounded(areas.sum()),
                 "fracture_area": rounded(areas[lab == 1].sum()),
             }
@@ -79,7 +79,7 @@ def break_to_folder(
                 "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
             },
             "seed": seed,
-            "parameters": dataclasses.asdict(params),
+            "parameters": params.to_dict(),
             "object": {
                 "bbox_min": [rounded(x) for x in puzzle.bbox_min],
                 "bbox_max": [rounded(x) for x in puzzle.bbox_max],
@@ -87,7 +87,7 @@ def break_to_folder(
                 "volume": rounded(puzzle.volume),
                 "area": rounded(puzzle.area),
             },
-            "labels": {"file": "labels.npz", "values": {"0": "original surface", "1": "fracture"}},
+            "labels": {"file": "labels.npz", "values": params.label_names()},
             "fragments": fragments_json,
             "contacts": [
                 {"fragments": [c.a, c.b], "area": rounded(c.area)} for c in puzzle.contacts

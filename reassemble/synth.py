@@ -1,11 +1,21 @@
 """Synthetic broken objects with exact ground truth, behind ``reassemble break``.
 
-A closed mesh is cut recursively: the largest piece is split by a rough, multi-scale
-surface (a fractal height field, never a plane) bent across the piece, using
-manifold3d booleans. manifold3d keeps the origin of every output triangle, so each
-face is labelled exactly as fracture (it came from a cut or chip solid) or original
-surface. Optional realism: chipped-off losses along the break, simplification and
-scan noise. Finally each fragment gets a random rigid pose and a shuffled name.
+A closed mesh is cut with manifold3d booleans, in one of four styles:
+
+- ``fractal``: the largest piece is split recursively by a rough, multi-scale surface (a
+  fractal height field) bent across the piece; roughness 0 is a plane.
+- ``smooth``: the same recursion with a few long-wavelength undulations and no fine
+  roughness, as clean breaks in ceramics, glass and stone.
+- ``cells``: a Voronoi-like partition: near-planar, gently curved faces meeting at sharp
+  edges, several pieces around an edge or corner, as physics-based prefracture datasets
+  (Breaking Bad) and Blender's cell fracture make them.
+- ``mixed``: the recursion where every cut draws its own style and roughness.
+
+manifold3d keeps the origin of every output triangle, so each face is labelled exactly
+as fracture (it came from a cut or chip solid) or original surface. Optional realism:
+chipped-off losses along the break, simplification, scan noise, and fragments written as
+unions of cells that keep the faces between them (``keep_cell_faces``, labelled interior).
+Finally each fragment gets a random rigid pose and a shuffled name.
 
 All lengths in :class:`BreakParams` are fractions of the object's bounding-box
 diagonal (or of the piece being cut), so the same options work in any unit.
@@ -13,6 +23,7 @@ diagonal (or of the piece being cut), so the same options work in any unit.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass, field
 
@@ -25,6 +36,7 @@ from .geometry import (
     make_scene,
     make_transform,
     random_rotation,
+    signed_volume,
     tet_volumes,
     transform_points,
 )
@@ -33,6 +45,14 @@ log = logging.getLogger(__name__)
 
 FRACTURE = 1
 ORIGINAL = 0
+INTERIOR = 2  # a face between two cells of one fragment (``keep_cell_faces``), kept twice
+
+LABEL_NAMES = {ORIGINAL: "original surface", FRACTURE: "fracture", INTERIOR: "interior"}
+
+STYLES = ("fractal", "smooth", "cells", "mixed")
+# RMS height of a cut / radius of the piece it cuts, when --roughness is not given
+STYLE_ROUGHNESS = {"fractal": 0.08, "smooth": 0.05, "cells": 0.02}
+CELLS_PER_FRAGMENT = 4  # cells in a fragment written with keep_cell_faces
 
 
 @dataclass(frozen=True)
@@ -43,6 +63,8 @@ class BreakParams:
     ----------
     pieces : number of fragments, >= 2
     roughness : RMS height of a cut surface as a fraction of the radius of the piece it cuts
+        (0 = a plane); by default the style's (:data:`STYLE_ROUGHNESS`). ``mixed`` draws its
+        own for every cut and takes none.
     hurst : Hurst exponent of the fractal cut surface (lower is rougher at small scales)
     cut_edge : edge length of the cut-surface grid, fraction of the object diagonal
     noise : standard deviation of Gaussian vertex noise, fraction of the object diagonal
@@ -54,10 +76,14 @@ class BreakParams:
     min_volume : smallest allowed fragment, as a fraction of the mean fragment volume
     min_thickness : thinnest allowed part of a cut, as a fraction of the piece's thickness
     scale : factor applied to the input mesh first (to make puzzles in other units)
+    style : one of :data:`STYLES`: how the cut surfaces are shaped
+    keep_cell_faces : write every fragment as a union of cells keeping the faces between
+        them, each twice with opposite orientations, labelled :data:`INTERIOR` (the layout
+        of Breaking Bad's early release)
     """
 
     pieces: int
-    roughness: float = 0.08
+    roughness: float | None = None
     hurst: float = 0.6
     cut_edge: float = 0.008
     noise: float = 0.0
@@ -68,18 +94,46 @@ class BreakParams:
     min_volume: float = 0.3
     min_thickness: float = 0.35
     scale: float = 1.0
+    style: str = "fractal"
+    keep_cell_faces: bool = False
+
+    def __post_init__(self):
+        if self.roughness is None and self.style in STYLE_ROUGHNESS:
+            object.__setattr__(self, "roughness", STYLE_ROUGHNESS[self.style])
+
+    def to_dict(self) -> dict:
+        """The options as written to ``ground_truth.json``.
+
+        Options added after the first ground-truth format (``style``, ``keep_cell_faces``)
+        are left out at their defaults, so a default puzzle's files read as before.
+        """
+        out = dataclasses.asdict(self)
+        for name in ("style", "keep_cell_faces"):
+            if out[name] == BreakParams.__dataclass_fields__[name].default:
+                del out[name]
+        return out
+
+    def label_names(self) -> dict[str, str]:
+        """``{label value: meaning}`` of the labels a puzzle made with these options holds."""
+        used = (ORIGINAL, FRACTURE, INTERIOR) if self.keep_cell_faces else (ORIGINAL, FRACTURE)
+        return {str(k): LABEL_NAMES[k] for k in used}
 
     def check(self) -> None:
         """Raise :class:`ReassembleError` for options out of range, naming the option."""
+        if self.style not in STYLES:
+            raise ReassembleError(f"--style must be one of {', '.join(STYLES)} (got {self.style!r})")
         if self.pieces < 2:
             raise ReassembleError(f"--pieces must be at least 2 (got {self.pieces})")
         if self.pieces > 200:
             raise ReassembleError(f"--pieces must be at most 200 (got {self.pieces})")
-        for name in ("roughness", "noise", "chips", "decimate", "gap"):
+        for name in ("noise", "chips", "decimate", "gap"):
             if not getattr(self, name) >= 0:
                 raise ReassembleError(f"--{name} must be >= 0 (got {getattr(self, name)})")
-        if not 0.0 < self.roughness <= 0.5:
-            raise ReassembleError(f"--roughness must be in (0, 0.5] (got {self.roughness})")
+        if self.style == "mixed":
+            if self.roughness is not None:
+                raise ReassembleError("--roughness does not apply to --style mixed (every cut draws its own)")
+        elif not 0.0 <= self.roughness <= 0.5:
+            raise ReassembleError(f"--roughness must be in [0, 0.5] (got {self.roughness})")
         if not 0.0 < self.hurst < 1.0:
             raise ReassembleError(f"hurst must be in (0, 1) (got {self.hurst})")
         if not 1e-4 <= self.cut_edge <= 0.1:
@@ -156,12 +210,37 @@ def fractal_heightfield(n: int, *, hurst: float, rng: np.random.Generator) -> np
     return h / rms if rms > 0 else h
 
 
+def undulating_heightfield(
+    n: int, *, waves: int, wavelength: tuple[float, float], rng: np.random.Generator
+) -> np.ndarray:
+    """Zero-mean, unit-RMS sum of a few plane waves on an (n, n) grid: long undulations,
+    no fine roughness.
+
+    ``wavelength`` (low, high) is in units of the grid's side; each wave draws its own
+    wavelength in that range, direction, phase and amplitude.
+    """
+    u = np.linspace(0.0, 1.0, n)
+    gx, gy = np.meshgrid(u, u, indexing="ij")
+    h = np.zeros((n, n))
+    for _ in range(waves):
+        angle = rng.uniform(0.0, 2.0 * np.pi)
+        k = 2.0 * np.pi / rng.uniform(*wavelength)
+        h += rng.uniform(0.5, 1.0) * np.cos(k * (np.cos(angle) * gx + np.sin(angle) * gy)
+                                             + rng.uniform(0.0, 2.0 * np.pi))
+    h -= h.mean()
+    rms = np.sqrt(np.mean(h * h))
+    return h / rms if rms > 0 else h
+
+
 def _heightfield_solid(
-    center: np.ndarray, frame: np.ndarray, radius: float, spacing: float, height: np.ndarray
+    center: np.ndarray, frame: np.ndarray, radius: float, spacing: float, height: np.ndarray,
+    *, coarse_bottom: bool = False,
 ):
     """Closed solid below a height field: the region ``z < h(x, y)`` of a box around a piece.
 
     ``frame`` columns are the field's x, y axes and its normal; ``height`` is (n, n).
+    ``coarse_bottom`` closes the box with a fan under the field's rim instead of a second
+    grid: the same solid where it cuts, half the triangles.
     """
     import manifold3d as mf
 
@@ -170,22 +249,28 @@ def _heightfield_solid(
     xs = np.linspace(-half, half, n)
     gx, gy = np.meshgrid(xs, xs, indexing="ij")
     top = np.column_stack([gx.ravel(), gy.ravel(), height.ravel()])
-    bottom = np.column_stack([gx.ravel(), gy.ravel(), np.full(n * n, -half)])
-    local = np.vstack([top, bottom])
 
     idx = np.arange(n * n).reshape(n, n)
     a, b = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
     c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
     top_faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
-    bottom_faces = top_faces[:, ::-1] + n * n
     # boundary loop, counter-clockwise seen from +z
     loop = np.concatenate(
         [idx[:, 0], idx[-1, 1:], idx[-2::-1, -1], idx[0, -2:0:-1]]
     )
-    p, q = loop, np.roll(loop, -1)
-    side_faces = np.concatenate(
-        [np.column_stack([p, p + n * n, q + n * n]), np.column_stack([p, q + n * n, q])]
-    )
+    if coarse_bottom:
+        rim = top[loop] * [1.0, 1.0, 0.0] - [0.0, 0.0, half]
+        local = np.vstack([top, rim, [[0.0, 0.0, -half]]])
+        under = n * n + np.arange(len(loop))  # the rim vertex under each loop vertex
+        p, q, bp, bq = loop, np.roll(loop, -1), under, np.roll(under, -1)
+        bottom_faces = np.column_stack([np.full(len(loop), len(local) - 1), bq, bp])
+    else:
+        bottom = np.column_stack([gx.ravel(), gy.ravel(), np.full(n * n, -half)])
+        local = np.vstack([top, bottom])
+        bottom_faces = top_faces[:, ::-1] + n * n
+        p, q = loop, np.roll(loop, -1)
+        bp, bq = p + n * n, q + n * n
+    side_faces = np.concatenate([np.column_stack([p, bp, bq]), np.column_stack([p, bq, q])])
     faces = np.concatenate([top_faces, bottom_faces, side_faces]).astype(np.uint32)
     world = local @ frame.T + center
     solid = mf.Manifold(mf.Mesh64(vert_properties=np.ascontiguousarray(world), tri_verts=faces))
@@ -237,11 +322,33 @@ def _frame_from_normal(normal: np.ndarray, rng: np.random.Generator) -> np.ndarr
     return np.column_stack([x, y, normal])
 
 
+# wavelengths of the undulating cut surfaces, in units of the cut grid's side (2.4 piece radii)
+_SMOOTH_WAVES = dict(waves=3, wavelength=(0.33, 0.83))  # 0.8-2 radii: a clean, curved break
+_CELL_WAVES = dict(waves=2, wavelength=(0.6, 1.25))  # 1.5-3 radii: a near-planar cell face
+
+
+def _cut_height(style: str, roughness: float, n: int, radius: float, *, hurst: float, rng) -> np.ndarray:
+    """(n, n) heights of one cut surface of the given style, RMS ``roughness * radius``."""
+    if style == "fractal":
+        return roughness * radius * fractal_heightfield(n, hurst=hurst, rng=rng)
+    waves = _SMOOTH_WAVES if style == "smooth" else _CELL_WAVES
+    return roughness * radius * undulating_heightfield(n, **waves, rng=rng)
+
+
+def _draw_cut(params: BreakParams, rng) -> tuple[str, float]:
+    """Style and roughness of one cut: the options', or for ``mixed`` a draw of its own."""
+    if params.style != "mixed":
+        return params.style, params.roughness
+    style = ("fractal", "smooth", "cells")[int(rng.integers(3))]
+    return style, STYLE_ROUGHNESS[style] * float(rng.uniform(0.25, 1.5))
+
+
 def _split_piece(piece, *, params: BreakParams, diag: float, min_vol: float, min_thick: float, room: int, rng):
     """Try rough cuts of ``piece`` until one gives 2..room+1 chunky parts; None if none does.
 
     Chunky: each part at least ``min_vol`` in volume and ``min_thick`` times the piece's
     thickness (its smallest extent), so no thin slabs are shaved off its side.
+    Returns (parts, the cutter's ID, (style, roughness) of the cut).
     """
     v, centroid, axis, extent, thick = _shape(piece)
     for _attempt in range(40):
@@ -252,8 +359,10 @@ def _split_piece(piece, *, params: BreakParams, diag: float, min_vol: float, min
         radius = float(np.max(np.linalg.norm(v - center, axis=1))) * 1.02
         spacing = params.cut_edge * diag
         n = int(np.clip(np.ceil(2.4 * radius / spacing) + 1, 16, 600))
-        height = params.roughness * radius * fractal_heightfield(n, hurst=params.hurst, rng=rng)
-        cutter = _heightfield_solid(center, _frame_from_normal(normal, rng), radius, spacing, height)
+        style, roughness = _draw_cut(params, rng)
+        height = _cut_height(style, roughness, n, radius, hurst=params.hurst, rng=rng)
+        cutter = _heightfield_solid(center, _frame_from_normal(normal, rng), radius, spacing, height,
+                                    coarse_bottom=style != "fractal")
         parts = (piece ^ cutter).decompose() + (piece - cutter).decompose()
         if not 2 <= len(parts) <= room + 1:
             continue
@@ -261,15 +370,17 @@ def _split_piece(piece, *, params: BreakParams, diag: float, min_vol: float, min
             continue
         if min(_shape(p)[4] for p in parts) < min_thick * thick:
             continue
-        return parts, cutter.original_id()
+        return parts, cutter.original_id(), (style, roughness)
     return None
 
 
-def _fracture(solid, *, params: BreakParams, diag: float, rng) -> tuple[list, set[int]]:
-    """Cut ``solid`` into ``params.pieces`` parts; returns the parts and the cutters' IDs."""
+def _fracture(solid, *, params: BreakParams, diag: float, rng) -> tuple[list, set[int], list]:
+    """Cut ``solid`` into ``params.pieces`` parts by recursive splits; returns the parts, the
+    cutters' IDs and the (style, roughness) of every cut."""
     total = solid.volume()
     pieces = [solid]
     cut_ids: set[int] = set()
+    cuts = []
     min_fraction = params.min_volume
     while len(pieces) < params.pieces:
         order = np.argsort([-p.volume() for p in pieces], kind="stable")
@@ -291,10 +402,187 @@ def _fracture(solid, *, params: BreakParams, diag: float, rng) -> tuple[list, se
                 f"could not cut into {params.pieces} pieces without slivers "
                 "(try fewer --pieces or a lower --roughness)"
             )
-        parts, cut_id = result
+        parts, cut_id, cut = result
         pieces[i : i + 1] = parts
         cut_ids.add(cut_id)
-    return pieces, cut_ids
+        cuts.append(cut)
+    return pieces, cut_ids, cuts
+
+
+def _inside_voxels(vertices: np.ndarray, faces: np.ndarray, *, target: int):
+    """Centres of the cubic grid cells inside a closed mesh, about ``target`` of them.
+
+    Returns points (k, 3), their integer grid indices (k, 3) and the grid step.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    step = (max(signed_volume(v, faces), 1e-300) / target) ** (1.0 / 3.0)
+    step = max(step, float(np.prod(hi - lo) / 4e6) ** (1.0 / 3.0))  # at most ~4M grid points
+    shape = np.maximum(np.ceil((hi - lo) / step).astype(np.int64), 1)
+    ijk = np.indices(shape).reshape(3, -1).T
+    points = lo + (ijk + 0.5) * step
+    scene = make_scene(v, faces)
+    import open3d as o3d
+
+    inside = scene.compute_occupancy(o3d.core.Tensor(points.astype(np.float32))).numpy() > 0.5
+    return points[inside], ijk[inside], float(step)
+
+
+def _cell_seeds(points: np.ndarray, count: int, rng, *, iterations: int = 2) -> np.ndarray:
+    """``count`` cell centres among ``points``: k-means++ seeding, then a few Lloyd steps.
+
+    Few steps on purpose: the cells come out chunky but not all of one size.
+    """
+    from scipy.spatial import cKDTree
+
+    seeds = [points[rng.integers(len(points))]]
+    d2 = np.sum((points - seeds[0]) ** 2, axis=1)
+    for _ in range(count - 1):
+        pick = points[rng.choice(len(points), p=d2 / d2.sum())]
+        seeds.append(pick)
+        d2 = np.minimum(d2, np.sum((points - pick) ** 2, axis=1))
+    seeds = np.array(seeds)
+    for _ in range(iterations):
+        owner = cKDTree(seeds).query(points)[1]
+        for c in range(count):
+            if np.any(owner == c):
+                seeds[c] = points[owner == c].mean(axis=0)
+    return seeds
+
+
+def _cutter_pairs(points: np.ndarray, owner: np.ndarray, seeds: np.ndarray) -> list[list[int]]:
+    """For every cell i, the later cells j whose bisector must bound it when the cells are
+    cut out one after another (cell i = what is left, on i's side of those bisectors).
+
+    Found by replaying the sequence on the grid points: a point cell i would take from a
+    nearer seed m adds the pair (i, m), until every point goes to its nearest seed.
+    """
+    k = len(seeds)
+    later: list[set[int]] = [set() for _ in range(k)]
+    while True:
+        taken = np.full(len(points), -1)
+        for i in range(k - 1):
+            mine = taken < 0
+            for j in later[i]:
+                mid, normal = 0.5 * (seeds[i] + seeds[j]), seeds[j] - seeds[i]
+                mine &= (points - mid) @ normal < 0
+            taken[mine] = i
+        taken[taken < 0] = k - 1
+        wrong = np.flatnonzero(taken != owner)
+        if len(wrong) == 0:
+            return [sorted(s) for s in later]
+        for i, m in set(zip(taken[wrong].tolist(), owner[wrong].tolist())):
+            later[i].add(m)
+
+
+def _partition(solid, seeds: np.ndarray, points: np.ndarray, owner: np.ndarray, *, step: float,
+               roughness: float, spacing: float | None, rng) -> tuple[list, set[int]]:
+    """Cut ``solid`` into the Voronoi-like cells of ``seeds`` (an exact partition).
+
+    Cell i is what is left of the solid on i's side of the (gently undulating) bisectors
+    with the later cells :func:`_cutter_pairs` names; the last cell is the rest. Every cut
+    is a pair's bisector, so mating faces are the same surface. ``spacing`` None: flat
+    bisectors on a coarse grid. Returns the cells (some may be empty or in several bodies)
+    and the cutters' IDs.
+    """
+    pairs = _cutter_pairs(points, owner, seeds)
+    rest, cells, ids = solid, [], set()
+    for i in range(len(seeds) - 1):
+        region = points[owner == i]
+        poly = None
+        for j in pairs[i]:
+            mid = 0.5 * (seeds[i] + seeds[j])
+            normal = (seeds[j] - seeds[i]) / np.linalg.norm(seeds[j] - seeds[i])
+            reach = float(np.max(np.linalg.norm(region - mid, axis=1))) if len(region) else 0.0
+            radius = 1.02 * (reach + 3.0 * step)
+            if spacing is None or roughness == 0:
+                n = 16
+                height = np.zeros((n, n))
+            else:
+                n = int(np.clip(np.ceil(2.4 * radius / spacing) + 1, 16, 600))
+                height = _cut_height("cells", roughness, n, radius, hurst=0.5, rng=rng)
+            frame = _frame_from_normal(normal, rng)
+            cutter = _heightfield_solid(mid, frame, radius, 2.4 * radius / (n - 1), height, coarse_bottom=True)
+            ids.add(cutter.original_id())
+            poly = cutter if poly is None else poly ^ cutter
+        if poly is None:  # nothing later borders this cell: it is all that is left
+            cells.append(rest)
+            rest = rest - rest
+            continue
+        cells.append(rest ^ poly)
+        rest = rest - poly
+    cells.append(rest)
+    return cells, ids
+
+
+def _single_bodies(grid_index: np.ndarray, owner: np.ndarray, count: int) -> bool:
+    """True if every cell's grid points form one 26-connected body, but for specks (under
+    8 points and 1 % of the cell: where a bisector crosses a wall a few points thick
+    at a shallow angle the grid leaves such islands): a cheap test of seeds."""
+    from scipy import ndimage
+
+    lo = grid_index.min(axis=0)
+    grid = np.full(tuple(grid_index.max(axis=0) - lo + 1), -1, dtype=np.int64)
+    grid[tuple((grid_index - lo).T)] = owner
+    for c, box in enumerate(ndimage.find_objects(grid + 1)):
+        if c >= count:
+            break
+        if box is None:
+            return False
+        mask = grid[box] == c
+        labelled, bodies = ndimage.label(mask, structure=np.ones((3, 3, 3)))
+        if bodies > 1:
+            sizes = np.sort(np.bincount(labelled.ravel())[1:])
+            if sizes[-2] >= max(8, 0.01 * sizes.sum()):
+                return False
+    return True
+
+
+def _cells(solid, *, params: BreakParams, diag: float, rng) -> tuple[list, set[int], list]:
+    """Cut ``solid`` into ``params.pieces`` Voronoi-like cells; returns the parts, the
+    cutters' IDs and the (style, roughness) of every cut.
+
+    Seeds that would leave a cell in several bodies (on a grid of ~40k points inside) or
+    smaller than ``min_volume`` of the mean are redrawn before any boolean.
+    """
+    from scipy.spatial import cKDTree
+
+    v, f, _ = _mesh_arrays(solid)
+    points, grid_index, step = _inside_voxels(v, f, target=40_000)
+    if len(points) < 20 * params.pieces:
+        raise ReassembleError(f"too thin to cut into {params.pieces} cells")
+    total = solid.volume()
+    for relax in range(4):
+        min_vol = params.min_volume * 0.5**relax * total / params.pieces
+        for _attempt in range(10):
+            seeds = _cell_seeds(points, params.pieces, rng)
+            owner = cKDTree(seeds).query(points)[1]
+            counts = np.bincount(owner, minlength=params.pieces)
+            if counts.min() * step**3 < min_vol or not _single_bodies(grid_index, owner, params.pieces):
+                continue
+            cells, ids = _partition(solid, seeds, points, owner, step=step, roughness=params.roughness,
+                                    spacing=params.cut_edge * diag, rng=rng)
+            parts = [p for c in cells for p in c.decompose()]
+            if len(parts) == params.pieces and min(p.volume() for p in parts) >= min_vol:
+                return parts, ids, [("cells", params.roughness)] * len(ids)
+    raise ReassembleError(
+        f"could not cut into {params.pieces} cells of one body each (try fewer --pieces)"
+    )
+
+
+def _split_into_cells(piece, *, count: int, rng) -> tuple[list, set[int]]:
+    """``piece`` cut by flat bisectors into up to ``count`` cells (an exact partition, a cell
+    may have several bodies); returns the non-empty cells and the cutters' IDs."""
+    from scipy.spatial import cKDTree
+
+    v, f, _ = _mesh_arrays(piece)
+    points, _, step = _inside_voxels(v, f, target=4000)
+    if len(points) < 4 * count:
+        return [piece], set()
+    seeds = _cell_seeds(points, count, rng)
+    owner = cKDTree(seeds).query(points)[1]
+    cells, ids = _partition(piece, seeds, points, owner, step=step, roughness=0.0, spacing=None, rng=rng)
+    return [c for c in cells if not c.is_empty()], ids
 
 
 def _chip(piece, *, cut_ids: set[int], params: BreakParams, diag: float, rng):
@@ -372,6 +660,16 @@ def _erode(vertices: np.ndarray, faces: np.ndarray, fracture: np.ndarray, depth:
     return out
 
 
+def _weld_exact(meshes: list[tuple[np.ndarray, np.ndarray, np.ndarray]]):
+    """One mesh of several (vertices, faces, origin): vertices at the same position merged,
+    so the cells of a fragment share their seams (noise then moves both sides alike)."""
+    v = np.vstack([m[0] for m in meshes])
+    offsets = np.cumsum([0] + [len(m[0]) for m in meshes[:-1]])
+    f = np.vstack([m[1] + o for m, o in zip(meshes, offsets)])
+    unique, inverse = np.unique(v, axis=0, return_inverse=True)
+    return unique, inverse.reshape(-1)[f], np.concatenate([m[2] for m in meshes])
+
+
 def break_mesh(
     vertices: np.ndarray, faces: np.ndarray, params: BreakParams, *, rng: np.random.Generator
 ) -> Puzzle:
@@ -389,7 +687,20 @@ def break_mesh(
     -------
     Puzzle
         Fragments in random poses, sorted by name, with ``T_world_fragment`` mapping each
-        back to the (scaled) input mesh's frame.
+        back to the (scaled) input mesh's frame. ``labels`` are ``ORIGINAL``, ``FRACTURE``
+        and, with ``keep_cell_faces``, ``INTERIOR``; ``stats["cut_styles"]`` lists the
+        (style, roughness) of every cut.
+
+    Notes
+    -----
+    The ``cells`` partition is Voronoi fracture, as Blender's Cell Fracture add-on makes it
+    and with the near-planar faces of the Breaking Bad dataset's pieces (Sellán et al.,
+    "Breaking Bad: A Dataset for Geometric Fracture and Reassembly", NeurIPS 2022): every
+    cell is bounded by the bisectors of its seed and its neighbours', so pieces meet along
+    edges and at corners.
+    Each cell is cut from what is left, so the cells partition the solid exactly even where
+    the bisectors undulate, and every cut face is a piece of one cutter: it is labelled
+    fracture and its mate lies on the same surface.
     """
     import manifold3d as mf
 
@@ -407,7 +718,8 @@ def break_mesh(
 
     # one stream per stage: noise, chips or decimation never change the cuts or the poses
     cut_rng, chip_rng, pose_rng, noise_rng = rng.spawn(4)
-    pieces, cut_ids = _fracture(solid, params=params, diag=diag, rng=cut_rng)
+    split = _cells if params.style == "cells" else _fracture
+    pieces, cut_ids, cuts = split(solid, params=params, diag=diag, rng=cut_rng)
     damage_ids = set(cut_ids)
     if params.chips > 0:
         chipped = []
@@ -419,12 +731,23 @@ def break_mesh(
     if params.decimate > 0:
         pieces = [p.simplify(params.decimate * diag) for p in pieces]
 
+    interior_ids: set[int] = set()
+    if params.keep_cell_faces:  # last, on the final pieces: their outer surface stays as it is
+        (cell_rng,) = rng.spawn(1)
+        meshes = []
+        for piece in pieces:
+            cells, ids = _split_into_cells(piece, count=CELLS_PER_FRAGMENT, rng=cell_rng)
+            interior_ids |= ids
+            meshes.append(_weld_exact([_mesh_arrays(c) for c in cells]))
+    else:
+        meshes = [_mesh_arrays(p) for p in pieces]
+
     names = [f"fragment_{k:02d}" for k in pose_rng.permutation(len(pieces))]
     world = []
-    for name, piece in zip(names, pieces):
-        v, f, origin = _mesh_arrays(piece)
+    for name, (v, f, origin) in zip(names, meshes):
         labels = np.where(origin == object_id, ORIGINAL, FRACTURE).astype(np.int8)
-        if not np.all(np.isin(origin, list(damage_ids | {object_id}))):
+        labels[np.isin(origin, list(interior_ids))] = INTERIOR
+        if not np.all(np.isin(origin, list(damage_ids | interior_ids | {object_id}))):
             raise RuntimeError("manifold3d lost the origin of some triangles")
         world.append((name, v, f, labels))
     contacts = _contacts(world, tol=max(1e-5, 2.0 * params.decimate) * diag)
@@ -444,6 +767,7 @@ def break_mesh(
         fragments.append(Fragment(name, local, f, labels, T_world_fragment))
     fragments.sort(key=lambda fr: fr.name)
     contacts.sort(key=lambda c: (c.a, c.b))
-    stats = {"cuts": len(cut_ids), "chips": len(damage_ids) - len(cut_ids)}
+    stats = {"cuts": len(cut_ids), "chips": len(damage_ids) - len(cut_ids), "cut_styles": cuts,
+             "interior_cuts": len(interior_ids)}
     log.info("broke into %d fragments with %d cuts, %d chips", len(fragments), stats["cuts"], stats["chips"])
     return Puzzle(fragments, contacts, bbox_min, bbox_max, float(volume), float(area), stats)

@@ -77,7 +77,7 @@ def test_cli_defaults_are_the_config_defaults(tmp_path):
     args = _parse("break", "spot", "--pieces", 3, "--out", tmp_path / "p")
     assert cli._config(args, base=Config(break_=BreakParams(pieces=3))).break_ == BreakParams(pieces=3)
     help_text = " ".join(cli.build_parser()._subparsers._group_actions[0].choices["break"].format_help().split())
-    assert f"(default {BreakParams(pieces=2).roughness:g})" in help_text
+    assert f"(default {BreakParams(pieces=2).cut_edge:g})" in help_text
 
 
 def test_cli_options_config_file_and_set_combine(tmp_path):

@@ -49,3 +49,38 @@ def test_bundled_vase_is_the_generated_one():
     assert np.allclose(np.sort(mesh.vertices, axis=0), np.sort(v, axis=0))
     specs = sherds_set()
     assert {s.mesh for s in specs} == {"vase"} and len({s.name for s in specs}) == len(specs)
+
+
+def test_field_sets_split_by_mesh_and_span_the_field():
+    from data_synth.sets import FIELD_KINDS, FIELD_MESHES, FIELD_STYLES, field_set
+
+    halves = {h: field_set(h) for h in ("tuning", "validation")}
+    meshes = {h: {s.mesh for s in specs} for h, specs in halves.items()}
+    assert not meshes["tuning"] & meshes["validation"]  # no mesh in both halves
+    for h, specs in halves.items():
+        assert {FIELD_MESHES[m].kind for m in meshes[h]} == set(FIELD_KINDS)
+        assert all(FIELD_MESHES[m].half == h for m in meshes[h])
+        assert {s.style for s in specs} == set(FIELD_STYLES)
+        assert min(s.pieces for s in specs) == 2 and max(s.pieces for s in specs) == 20
+        for style in FIELD_STYLES:  # every style clean and noisy, on every mesh
+            for noisy in (False, True):
+                assert {s.mesh for s in specs if s.style == style and bool(s.noise) == noisy} == meshes[h]
+        assert any(s.roughness == 0.01 for s in specs)
+        assert len({s.name for s in specs}) == len(specs)
+    bundled = set(bundled_meshes())
+    for m in FIELD_MESHES.values():  # every source is named in a form make_sets resolves
+        assert m.source in bundled or m.source.split(":")[0] in ("shared", "shapes")
+
+
+def test_a_field_puzzle_builds_from_a_bundled_mesh(tmp_path):
+    """The field sets' path through make_sets (source prepared, style and roughness passed)."""
+    from data_synth.make_sets import build_one, prepare_source
+    from data_synth.sets import PuzzleSpec
+
+    spec = PuzzleSpec("octagonal_pocket", 3, 0, style="cells")
+    source = prepare_source("octagonal_pocket", tmp_path, tmp_path / "no-shared")
+    assert source.is_file()
+    r = build_one(spec, tmp_path, mesh=source)
+    gt = json.loads((tmp_path / spec.name / "ground_truth.json").read_text())
+    assert not r["cached"] and gt["parameters"]["style"] == "cells" and len(gt["fragments"]) == 3
+    assert build_one(spec, tmp_path, mesh=source)["cached"]

@@ -97,7 +97,8 @@ def _fraction(text: str) -> float:
 def _add_fill_holes(p) -> None:
     p.add_argument("--fill-holes", type=_fraction, nargs="?", const=FILL_HOLES, default=None, metavar="MAX",
                    help="close the holes of open scans with flat patches, those up to MAX of the mesh's "
-                   f"bounding-box diagonal (default {FILL_HOLES} when given; without it an open mesh is refused)")
+                   f"bounding-box diagonal (default {FILL_HOLES} when given; without it an open mesh is read as it is, "
+                   "its holes bridged by the winding number)")
 
 
 def _thin_walls(text: str) -> bool | None:
@@ -168,7 +169,8 @@ def _cmd_match(args: argparse.Namespace) -> int:
 
     summary = match_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
                               config=MatchConfig(max_memory=args.max_memory, gap=args.gap,
-                                                 thin_walls=args.thin_walls, fill_holes=args.fill_holes),
+                                                 thin_walls=args.thin_walls, fill_holes=args.fill_holes,
+                                                 split_bodies=args.split_bodies),
                               jobs=_jobs(args),
                               progress=not args.quiet)
     print(f"{summary['fragments']} fragments, {summary['pairs']} pairs, {summary['touching']} touching:")
@@ -204,7 +206,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     report = run_to_folder(args.inputs, args.out, seed=args.seed, force=args.force, debug=args.debug_files,
                            config=MatchConfig(max_memory=args.max_memory, gap=args.gap,
-                                              thin_walls=args.thin_walls, fill_holes=args.fill_holes),
+                                              thin_walls=args.thin_walls, fill_holes=args.fill_holes,
+                                              split_bodies=args.split_bodies),
                            jobs=_jobs(args),
                            progress=not args.quiet)
     _print_run(report, args.out)
@@ -364,6 +367,9 @@ def _add_inputs(p) -> None:
                    help="match as thin-walled sherds, along their break strips: 'auto' (default: when most "
                    "fragments are walls under 8 %% of their diagonal thick), 'yes' or 'no'")
     _add_fill_holes(p)
+    p.add_argument("--split-bodies", action="store_true",
+                   help="a file holding several separate bodies gives one fragment per body (stem.1, stem.2, "
+                   "...); by default a file is one rigid piece")
     _add_common(p)
 
 

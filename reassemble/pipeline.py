@@ -21,6 +21,7 @@ from .files import (
     TRANSFORMS_CONVENTION,
     check_output_folder,
     load_mesh,
+    mesh_warning,
     read_json,
     read_transforms,
     resolve_mesh_path,
@@ -54,6 +55,8 @@ def describe_to_file(
         raise ReassembleError(f"{out}: file exists (use --force to replace it)")
     path = resolve_mesh_path(mesh)
     data = load_mesh(path, require_closed=True, fill_holes=fill_holes)
+    if mesh_warning(data):
+        log.warning("%s", mesh_warning(data))
     radii = np.asarray(radii, dtype=np.float64)
     diag = float(np.linalg.norm(np.ptp(data.vertices, axis=0)))
     if relative:
@@ -89,6 +92,8 @@ def break_to_folder(
     path = resolve_mesh_path(mesh)
     params.check()
     data = load_mesh(path, require_closed=True, fill_holes=fill_holes)
+    if mesh_warning(data):
+        log.warning("%s", mesh_warning(data))
     try:
         puzzle = break_mesh(data.vertices, data.faces, params, rng=np.random.default_rng(seed))
     except ReassembleError as exc:
@@ -220,6 +225,8 @@ class MatchConfig:
         all of them); two by default: the coarsest ball reaches past a small contact into
         the air and other fragments, and with it the signatures of small mating faces
         disagree (``benchmarks/pairwise.py --signature-radii``)
+    split_bodies : a file holding several separate bodies gives one fragment per body
+        (else a file is one rigid piece, :func:`load_fragments`)
     """
 
     radii: tuple[float, ...] = (0.02, 0.04, 0.08)
@@ -231,6 +238,7 @@ class MatchConfig:
     thin_walls: bool | None = None
     fill_holes: float | None = None
     signature_radii: int | None = 2
+    split_bodies: bool = False
 
 
 @dataclasses.dataclass
@@ -560,16 +568,18 @@ def match_set(
 
 
 def load_fragments(
-    inputs: list[str | Path], *, fill_holes: float | None = None
+    inputs: list[str | Path], *, fill_holes: float | None = None, split: bool = False
 ) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:
     """Read fragment meshes from files and folders; a bad file is skipped with a warning.
 
     Returns the meshes by name and the warnings (one line each). The name is the file
-    stem; a file holding several separate bodies gives one fragment per body (``stem.1``,
-    ``stem.2``, ... largest first; specks under 1 % of the largest's volume are dropped).
+    stem: a file is one rigid piece, whatever its separate bodies. With ``split``, a file
+    holding several separate bodies gives one fragment per body (``stem.1``, ``stem.2``,
+    ... largest first; specks under 1 % of the largest's volume are dropped).
     A fragment identical to one already read (same welded vertices and faces) is skipped.
-    With ``fill_holes``, the holes of open scans are closed (see :func:`files.load_mesh`), with
-    a warning saying how many and how large.
+    A mesh that is not a clean closed surface is repaired (see :func:`files.load_mesh`), with
+    one warning saying what was found and done; with ``fill_holes``, the holes of open
+    scans are closed with flat patches.
     """
     from .files import MESH_SUFFIXES
 
@@ -592,10 +602,9 @@ def load_fragments(
         except ReassembleError as exc:
             warnings.append(f"skipped: {exc}")
             continue
-        if whole.filled_holes:
-            warnings.append(f"{path}: closed {len(whole.filled_holes)} hole(s), the largest "
-                            f"{whole.filled_holes[0]:.1%} of its size, with flat patches (an open scan)")
-        bodies, debris = split_bodies(whole)
+        if mesh_warning(whole):
+            warnings.append(mesh_warning(whole))
+        bodies, debris = split_bodies(whole) if split else ([whole], 0)
         if debris:
             warnings.append(f"{path}: dropped {debris} tiny separate piece(s) (each under "
                             f"{DEBRIS_SHARE:.0%} of the main body's volume: scan debris)")
@@ -691,7 +700,7 @@ def match_to_folder(
     from .segmentation import SegmentParams
 
     check_output_folder(out, force=force)  # before minutes of work, not after
-    meshes, warnings = load_fragments(inputs, fill_holes=config.fill_holes)
+    meshes, warnings = load_fragments(inputs, fill_holes=config.fill_holes, split=config.split_bodies)
     seg_params = SegmentParams()
     frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,
                                      progress=progress)
@@ -741,7 +750,7 @@ def run_to_folder(
     check_output_folder(out, force=force)  # before minutes of work, not after
     timings = {}
     t0 = time.perf_counter()
-    meshes, warnings = load_fragments(inputs, fill_holes=config.fill_holes)
+    meshes, warnings = load_fragments(inputs, fill_holes=config.fill_holes, split=config.split_bodies)
     seg_params = SegmentParams()
     assembly_params = assembly_params or AssemblyParams()
     frags, size = prepare_fragments(meshes, config=config, segment_params=seg_params, seed=seed, jobs=jobs,

@@ -270,6 +270,92 @@ def _sides(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndar
     return front, back, sure
 
 
+def _same_orientation(faces: np.ndarray, original: np.ndarray) -> np.ndarray:
+    """(f,) bool: each face is the original one, up to a rotation of its vertices."""
+    return (np.all(faces == original, axis=1) | np.all(faces == original[:, [1, 2, 0]], axis=1)
+            | np.all(faces == original[:, [2, 0, 1]], axis=1))
+
+
+OVERLAP = 0.02  # a stretch of a ray this long (x the diagonal) inside twice is an overlap
+OVERLAP_RAYS = 96  # rays per side of the bounding box, along each axis
+
+
+def _overlaps(vertices: np.ndarray, faces: np.ndarray) -> bool:
+    """Whether a closed triangle set covers some of space twice (overlapping shells, a
+    surface passing through itself) or negatively, anywhere rays along the three axes
+    stay so for ``OVERLAP`` of the diagonal: the running sum of signed crossings (in
+    against the normal +1, out -1) leaves {0, 1} there. The folds of a noisy surface are
+    far shorter."""
+    import open3d as o3d
+
+    from .geometry import make_scene
+
+    scene = make_scene(vertices, faces)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    diag = float(np.linalg.norm(hi - lo))
+    tri = vertices[faces]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    for axis in range(3):
+        a, b = [i for i in range(3) if i != axis]
+        ua = np.linspace(lo[a], hi[a], OVERLAP_RAYS + 2)[1:-1] + 1.234567e-4 * diag
+        ub = np.linspace(lo[b], hi[b], OVERLAP_RAYS + 2)[1:-1] + 2.345678e-4 * diag
+        A, B = np.meshgrid(ua, ub, indexing="ij")
+        rays = np.zeros((A.size, 6), np.float32)
+        rays[:, a], rays[:, b], rays[:, axis] = A.ravel(), B.ravel(), lo[axis] - 0.01 * diag
+        rays[:, 3 + axis] = 1.0
+        hits = scene.list_intersections(o3d.core.Tensor(rays))
+        rid = hits["ray_ids"].numpy().astype(np.int64)
+        t = hits["t_hit"].numpy().astype(np.float64)
+        sign = -np.sign(normals[hits["primitive_ids"].numpy().astype(np.int64), axis]).astype(np.int64)
+        order = np.lexsort((sign, t, rid))
+        rid, t, sign = rid[order], t[order], sign[order]
+        dup = np.zeros(len(t), bool)
+        dup[1:] = (rid[1:] == rid[:-1]) & (t[1:] - t[:-1] < 1e-6 * diag) & (sign[1:] == sign[:-1])
+        rid, t, sign = rid[~dup], t[~dup], sign[~dup]
+        if len(rid) < 2:
+            continue
+        start = np.r_[True, rid[1:] != rid[:-1]]
+        run = np.cumsum(sign)
+        run -= np.repeat(run[start] - sign[start], np.diff(np.r_[np.flatnonzero(start), len(run)]))
+        length = np.r_[t[1:] - t[:-1], 0.0]
+        length[np.r_[rid[1:] != rid[:-1], True]] = 0.0  # past a ray's last crossing
+        if np.any(((run >= 2) | (run <= -1)) & (length > OVERLAP * diag)):
+            return True
+    return False
+
+
+SLIVER = 1e-5  # a face lower than this (x the diagonal) is below what float32 rays resolve
+
+
+def _like_neighbours(vertices: np.ndarray, faces: np.ndarray, interior: np.ndarray,
+                     dangling: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Slivers (height under ``SLIVER`` of the diagonal: rays slip past their edges) take
+    the verdict most of their edge neighbours have, neighbours that are no slivers first.
+    Returns (interior, dangling, sliver)."""
+    from .geometry import face_adjacency, face_areas
+
+    tri = vertices[faces]
+    longest = np.max(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2), axis=1)
+    height = 2.0 * face_areas(vertices, faces) / np.maximum(longest, 1e-300)
+    thin = height < SLIVER * float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    if not thin.any():
+        return interior, dangling, thin
+    pairs = face_adjacency(faces)[0]
+    pairs = np.vstack([pairs, pairs[:, ::-1]])
+    state = np.where(interior, 1, np.where(dangling, 2, 0))
+    known = ~thin
+    for _ in range(8):
+        use = pairs[known[pairs[:, 1]] & ~known[pairs[:, 0]]]
+        if len(use) == 0:
+            break
+        votes = np.zeros((len(faces), 3), np.int64)
+        np.add.at(votes, (use[:, 0], state[use[:, 1]]), 1)
+        got = np.flatnonzero(votes.sum(axis=1) > 0)
+        state[got] = np.argmax(votes[got], axis=1)
+        known[got] = True
+    return state == 1, state == 2, thin
+
+
 def repair_surface(vertices: np.ndarray, faces: np.ndarray) -> Repair:
     """The outer surface of a triangle set (welded vertices, no collapsed faces).
 
@@ -309,6 +395,13 @@ def repair_surface(vertices: np.ndarray, faces: np.ndarray) -> Repair:
     if len(f) == 0:
         return Repair(f, duplicates=duplicates, paired=paired)
     f, patch = _orient(vertices, f)
+    if is_closed_solid(f) and not _overlaps(vertices, f):
+        # a closed solid by parity that nowhere covers itself twice: nothing inside it or
+        # dangling (the face-by-face reading would only add the noise of rays at slivers
+        # and at the folds a noisy surface makes)
+        same = _same_orientation(f, original)
+        return Repair(f, duplicates=duplicates, paired=paired, reoriented=int(np.sum(~same)),
+                      non_manifold=edge_counts(f)[2])
     front, back, sure = _sides(vertices, f)
     area = face_areas(vertices, f)
     n_patch = int(patch.max()) + 1
@@ -338,12 +431,12 @@ def repair_surface(vertices: np.ndarray, faces: np.ndarray) -> Repair:
         m[rest] = 0.5 * (np.clip(front[rest], 0.0, 1.0) + np.clip(back[rest], 0.0, 1.0))
     interior = (m > INTERIOR) & ~dangling
     dangling |= m < DANGLING
-    if is_closed_solid(f) and np.all(m[sure] == 0.5):
+    interior, dangling, thin = _like_neighbours(vertices, f, interior, dangling)
+    if is_closed_solid(f) and np.all(m[sure & ~thin] == 0.5):
         # a closed solid whose every face the rays read surely has solid on one side only:
-        # nothing inside or dangling (the few unsure are slivers whose normal is noise)
+        # nothing inside or dangling (the few others are slivers whose normal is noise)
         interior[:], dangling[:] = False, False
-    same = np.all(f == original, axis=1) | np.all(f == original[:, [1, 2, 0]], axis=1) | np.all(
-        f == original[:, [2, 0, 1]], axis=1)
+    same = _same_orientation(f, original)
     out = f[~interior & ~dangling]
     reoriented = int(np.sum(~same & ~interior & ~dangling))
     non_manifold = edge_counts(out)[2] if len(out) else 0

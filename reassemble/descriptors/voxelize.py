@@ -156,14 +156,15 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     -----
     Evaluating ``w`` at every voxel would cost a hierarchical sum per voxel. Along a ray
     it jumps by exactly +1 where the ray enters through a face (against its normal) and
-    -1 where it leaves, and away from the triangles it changes only where the surface
-    has holes. So one ray per grid column gives ``w`` as the running sum of the signed
-    crossings (exact for any closed triangle set: non-manifold, overlapping, folded), and
-    ``w`` itself (libigl's fast winding number) is evaluated only where that sum can be
-    wrong: in every voxel of a column whose crossings do not sum to zero (it passes
-    through a hole, or a crossing went unseen at an edge), and on a coarse lattice (every
-    ``COARSE`` voxels) that catches columns through two holes; a coarse cell whose corners
-    disagree with the running sum is evaluated voxel by voxel.
+    -1 where it leaves, and between crossings it changes only near holes. So one ray per
+    grid column gives ``w`` as the running sum of the signed crossings, exact for any
+    closed triangle set (non-manifold, overlapping, folded), and ``w`` itself (libigl's
+    fast winding number) is evaluated only in the columns where that sum can be wrong:
+    those whose crossings do not sum to zero (through a hole, or past an unseen crossing)
+    and those next to a point of a coarse lattice (every ``COARSE`` voxels) where it
+    disagrees with ``w`` by more than ``LATTICE_TOL`` (through two holes, or beside one).
+    There ``w`` is read at both ends and the middle of every stretch between crossings:
+    constant where they agree, else every ``STRIDE`` voxels and linearly between.
 
     Returns
     -------
@@ -199,29 +200,22 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     k = np.clip(np.ceil(u), 0, nz).astype(np.int64)  # first voxel centre past the crossing
     diff = np.zeros((ua.size, nz + 1), np.int32)
     np.add.at(diff, (ray_ids, k), sign)
-    w = np.cumsum(diff[:, :nz], axis=1).astype(np.float64).reshape(grid.shape)
-    total = np.bincount(ray_ids, sign, ua.size).reshape(nx, ny)
-    exact = np.zeros(grid.shape, bool)
-    exact[total != 0] = True
-    # crossings the running sum cannot see: a coarse lattice of exact values
-    c = COARSE
-    ci, cj, ck = (np.arange(0, n, c) for n in grid.shape)
-    ci, cj, ck = (np.unique(np.r_[a, n - 1]) for a, n in zip((ci, cj, ck), grid.shape))
+    w = np.cumsum(diff[:, :nz], axis=1).astype(np.float64)  # (columns, nz)
+    suspect = np.bincount(ray_ids, sign, ua.size) != 0
+    # what the running sum cannot see: a coarse lattice of exact values
+    ci, cj, ck = (np.unique(np.r_[np.arange(0, n, COARSE), n - 1]) for n in grid.shape)
     I, J, K = np.meshgrid(ci, cj, ck, indexing="ij")
-    lattice = np.column_stack([I.ravel(), J.ravel(), K.ravel()])
-    wl = winding_number(vertices, faces, grid.origin + grid.h * lattice)
-    bad = np.abs(wl - w[lattice[:, 0], lattice[:, 1], lattice[:, 2]]) > 0.02
+    wl = winding_number(vertices, faces, grid.origin + grid.h * np.column_stack([I.ravel(), J.ravel(), K.ravel()]))
+    bad = (np.abs(wl - w.reshape(grid.shape)[I.ravel(), J.ravel(), K.ravel()]) > LATTICE_TOL).reshape(I.shape)
+    bad = bad.any(axis=2)
     if bad.any():
-        bad = bad.reshape(I.shape)
-        # a coarse cell with a bad corner: every voxel of it
-        cell = bad[:-1, :-1, :-1] | bad[1:, :-1, :-1] | bad[:-1, 1:, :-1] | bad[:-1, :-1, 1:] \
-            | bad[1:, 1:, :-1] | bad[1:, :-1, 1:] | bad[:-1, 1:, 1:] | bad[1:, 1:, 1:]
-        for a, b, e in zip(*np.nonzero(cell)):
-            exact[ci[a]:ci[a + 1] + 1, cj[b]:cj[b + 1] + 1, ck[e]:ck[e + 1] + 1] = True
-    where = np.flatnonzero(exact)
-    if len(where):
-        ijk = np.column_stack(np.unravel_index(where, grid.shape))
-        w.ravel()[where] = winding_number(vertices, faces, grid.origin + grid.h * ijk)
+        near = np.zeros((nx, ny), bool)  # the columns of every lattice cell with a bad corner
+        for a, b in zip(*np.nonzero(bad)):
+            near[ci[max(a - 1, 0)]:ci[min(a + 1, len(ci) - 1)] + 1, cj[max(b - 1, 0)]:cj[min(b + 1, len(cj) - 1)] + 1] = True
+        suspect |= near.ravel()
+    if suspect.any():
+        _exact_columns(w, np.flatnonzero(suspect), ray_ids, k, grid, vertices, faces)
+    w = w.reshape(grid.shape)
     inside = w >= 0.5
     boundary = np.zeros(grid.shape, bool)
     for axis in range(3):
@@ -232,22 +226,65 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
         boundary[tuple(lo)] |= change
         boundary[tuple(hi)] |= change
     # the voxels either side of every crossing: open sheets whose two sides read alike too
-    rid = ray_ids[(k > 0) & (k < nz)]
-    kk = k[(k > 0) & (k < nz)]
-    col_i, col_j = np.unravel_index(rid, (nx, ny))
-    boundary[col_i, col_j, kk] = True
-    boundary[col_i, col_j, kk - 1] = True
+    inner = (k > 0) & (k < nz)
+    col_i, col_j = np.unravel_index(ray_ids[inner], (nx, ny))
+    boundary[col_i, col_j, k[inner]] = True
+    boundary[col_i, col_j, k[inner] - 1] = True
     band = binary_dilation(boundary, iterations=max(1, int(np.ceil(width / 2))))
     where = np.flatnonzero(band)
     d = _distances(scene, grid, where)
     ramp = np.clip(0.5 - np.where(inside.ravel()[where], -d, d) / (width * grid.h), 0.0, 1.0)
     occ = np.clip(w, 0.0, 1.0).astype(np.float32).ravel()
-    near = d < 0.5 * width * grid.h
-    occ[where[near]] = ramp[near]
+    near_surface = d < 0.5 * width * grid.h
+    occ[where[near_surface]] = ramp[near_surface]
     return occ.reshape(grid.shape)
 
 
 COARSE = 8  # lattice step (voxels) of the exact winding numbers that check the running sum
+LATTICE_TOL = 0.25  # ... a lattice point further than this from the sum marks its columns
+STRIDE = 4  # in a column's stretch where w varies, exact every this many voxels, linear between
+CONSTANT = 0.02  # a stretch whose ends and middle agree this well is constant
+
+
+def _exact_columns(w: np.ndarray, columns: np.ndarray, ray_ids: np.ndarray, k: np.ndarray, grid: Grid,
+                   vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Replace, in place, the running sum ``w`` (columns, nz) of the given columns by the
+    winding number: per stretch between crossings, the exact value at both ends and the
+    middle, and where these differ, every ``STRIDE`` voxels with linear interpolation."""
+    from ..repair import winding_number
+
+    nx, ny, nz = grid.shape
+    cuts = np.zeros((len(columns), nz + 1), bool)
+    row = np.full(nx * ny, -1)
+    row[columns] = np.arange(len(columns))
+    sel = row[ray_ids] >= 0
+    cuts[row[ray_ids[sel]], k[sel]] = True
+    cuts[:, 0] = cuts[:, nz] = True
+    r, a = np.nonzero(cuts[:, :nz])  # stretch starts, in row order
+    nxt = np.flatnonzero(cuts.ravel())
+    ends = nxt[1:][np.diff(nxt // (nz + 1)) == 0] % (nz + 1)  # the next cut in the same row
+    keep = ends > a
+    r, a, b = r[keep], a[keep], ends[keep]
+    col = columns[r]
+    i, j = np.unravel_index(col, (nx, ny))
+    mid = (a + b - 1) // 2
+
+    def at(ii, jj, kk):
+        return winding_number(vertices, faces, grid.origin + grid.h * np.column_stack([ii, jj, kk]))
+
+    sample = at(np.r_[i, i, i], np.r_[j, j, j], np.r_[a, mid, b - 1]).reshape(3, -1)
+    constant = np.ptp(sample, axis=0) <= CONSTANT
+    for s in np.flatnonzero(constant):
+        w[col[s], a[s]:b[s]] = sample[1, s]
+    varying = np.flatnonzero(~constant)
+    if len(varying) == 0:
+        return
+    ks = [np.unique(np.r_[np.arange(a[s], b[s], STRIDE), b[s] - 1]) for s in varying]
+    counts = np.array([len(x) for x in ks])
+    values = at(np.repeat(i[varying], counts), np.repeat(j[varying], counts), np.concatenate(ks))
+    offsets = np.r_[0, np.cumsum(counts)]
+    for n, s in enumerate(varying):
+        w[col[s], a[s]:b[s]] = np.interp(np.arange(a[s], b[s]), ks[n], values[offsets[n]:offsets[n + 1]])
 
 
 def saturated_square(d: np.ndarray, r: float, band: float) -> np.ndarray:

@@ -205,8 +205,9 @@ _DIRECTIONS = np.array([[0.5774, 0.6133, 0.5389], [-0.7071, 0.3827, 0.5946], [0.
 _DIRECTIONS /= np.linalg.norm(_DIRECTIONS, axis=1, keepdims=True)
 
 
-def _ray_sides(scene, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(front, back, sure): per face, the winding number of the rest of the set at its
+def _ray_sides(scene, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
+               idx: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(front, back, sure): per face ``idx``, the winding number of the rest of the set at its
     centroid counted along rays out of its front and out of its back (crossings out
     through a face, along its normal, minus crossings in, to infinity), one pair of rays
     per direction of ``_DIRECTIONS`` not too near the face's plane, the most common count
@@ -215,11 +216,11 @@ def _ray_sides(scene, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarr
     one is off by one, which the vote catches."""
     import open3d as o3d
 
-    c = vertices[faces].mean(axis=1)
+    c = vertices[faces[idx]].mean(axis=1)
     diag = float(np.linalg.norm(np.ptp(vertices, axis=0)))
     tol = 1e-6 * diag
-    q, k = len(faces), len(_DIRECTIONS)
-    cos = normals @ _DIRECTIONS.T  # (q, k)
+    q, k = len(idx), len(_DIRECTIONS)
+    cos = normals[idx] @ _DIRECTIONS.T  # (q, k)
     usable = np.abs(cos) > 0.2
     usable[np.arange(q), np.argmax(np.abs(cos), axis=1)] = True  # at least one per face
     out_dir = np.sign(cos)[:, :, None] * _DIRECTIONS[None]  # (q, k, 3), along the front
@@ -231,7 +232,7 @@ def _ray_sides(scene, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarr
     rid = hits["ray_ids"].numpy().astype(np.int64)
     t = hits["t_hit"].numpy().astype(np.float64)
     prim = hits["primitive_ids"].numpy().astype(np.int64)
-    own = np.tile(np.repeat(np.arange(q), k), 2)
+    own = np.tile(np.repeat(idx, k), 2)
     keep = (t > tol) & (prim != own[rid])
     rid, t, prim = rid[keep], t[keep], prim[keep]
     sign = np.sign(np.einsum("ij,ij->i", normals[prim], rays[rid, 3:])).astype(np.int64)
@@ -249,9 +250,11 @@ def _ray_sides(scene, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarr
     return np.round(front), np.round(back), sure
 
 
-def _sides(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _sides(vertices: np.ndarray, faces: np.ndarray, only: np.ndarray | None = None
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Winding number of the whole set just in front of (outside, by the face's normal) and
-    just behind each face's centroid, and whether the rays were sure of it.
+    just behind each face's centroid, and whether the rays were sure of it; for the faces
+    ``only`` (indices), all faces by default.
 
     Counted along rays (:func:`_ray_sides`); where they do not agree (a ray left through a
     hole, or met an edge), evaluated by libigl's fast winding number at points just off
@@ -260,13 +263,14 @@ def _sides(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndar
     from .geometry import face_areas, face_normals, make_scene
 
     n = face_normals(vertices, faces)
-    front, back, sure = _ray_sides(make_scene(vertices, faces), vertices, faces, n)
-    unsure = np.flatnonzero(~sure)
+    idx = np.arange(len(faces)) if only is None else np.asarray(only)
+    front, back, sure = _ray_sides(make_scene(vertices, faces), vertices, faces, n, idx)
+    unsure = idx[~sure]
     if len(unsure):
         c = vertices[faces[unsure]].mean(axis=1)
         eps = OFFSET * np.sqrt(2.0 * face_areas(vertices, faces[unsure]))[:, None] * n[unsure]
         w = winding_number(vertices, faces, np.vstack([c + eps, c - eps]))
-        front[unsure], back[unsure] = w[: len(unsure)], w[len(unsure):]
+        front[~sure], back[~sure] = w[: len(unsure)], w[len(unsure):]
     return front, back, sure
 
 
@@ -426,9 +430,13 @@ def repair_surface(vertices: np.ndarray, faces: np.ndarray) -> Repair:
                 continue
             break
         dangling |= new
-        rest = np.flatnonzero(~dangling)
-        front[rest], back[rest], sure[rest] = _sides(vertices, f[rest])
-        m[rest] = 0.5 * (np.clip(front[rest], 0.0, 1.0) + np.clip(back[rest], 0.0, 1.0))
+        # read again those a sheet may have spoiled: not surely on the surface
+        again = np.flatnonzero(~dangling & ((m != 0.5) | ~sure))
+        if len(again):
+            rest = np.flatnonzero(~dangling)
+            fr, bk, su = _sides(vertices, f[rest], only=np.searchsorted(rest, again))
+            front[again], back[again], sure[again] = fr, bk, su
+            m[again] = 0.5 * (np.clip(fr, 0.0, 1.0) + np.clip(bk, 0.0, 1.0))
     interior = (m > INTERIOR) & ~dangling
     dangling |= m < DANGLING
     interior, dangling, thin = _like_neighbours(vertices, f, interior, dangling)

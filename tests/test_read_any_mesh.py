@@ -33,12 +33,12 @@ def _clean(name: str = "spot") -> trimesh.Trimesh:
     return trimesh.Trimesh(m.vertices, m.faces, process=False)
 
 
-def cell_union(name: str = "spot", cells: int = 6, seed: int = 0) -> tuple[trimesh.Trimesh, trimesh.Trimesh]:
+def cell_union(name: str | trimesh.Trimesh = "spot", cells: int = 6, seed: int = 0):
     """(the mesh cut into Voronoi cells, every cell closed on its own so each wall between
-    two cells is there twice, once per cell; the clean solid)."""
+    two cells is there twice, once per cell, as Breaking Bad's pieces are; the clean solid)."""
     import manifold3d
 
-    solid = _clean(name)
+    solid = _clean(name) if isinstance(name, str) else name
     rng = np.random.default_rng(seed)
     lo, hi = solid.bounds
     seeds = rng.uniform(lo + 0.2 * (hi - lo), hi - 0.2 * (hi - lo), (cells, 3))
@@ -125,9 +125,9 @@ def torus_knot(tube: float = 1.0, n: int = 240, sides: int = 16, pieces: int = 8
     return mesh, _manifold_to_trimesh(manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add))
 
 
-def flipped_patches(name: str = "spot", patches: int = 4, seed: int = 1) -> tuple[trimesh.Trimesh, trimesh.Trimesh]:
+def flipped_patches(name: str | trimesh.Trimesh = "spot", patches: int = 4, seed: int = 1):
     """(the mesh with the faces of a few round patches turned over; the clean mesh)."""
-    solid = _clean(name)
+    solid = _clean(name) if isinstance(name, str) else name
     rng = np.random.default_rng(seed)
     centres = solid.vertices[rng.choice(len(solid.vertices), patches, replace=False)]
     c = solid.triangles_center
@@ -161,10 +161,10 @@ def open_scan(name: str = "spot", holes: int = 3, size: float = 0.06, seed: int 
     return scan, solid, np.array(centres), radius
 
 
-def duplicate_soup(name: str = "spot", share: float = 0.2, seed: int = 3) -> tuple[trimesh.Trimesh, trimesh.Trimesh]:
+def duplicate_soup(name: str | trimesh.Trimesh = "spot", share: float = 0.2, seed: int = 3):
     """(an unwelded triangle soup, every triangle its own three vertices, a fifth of them
     twice; the clean mesh)."""
-    solid = _clean(name)
+    solid = _clean(name) if isinstance(name, str) else name
     rng = np.random.default_rng(seed)
     extra = rng.choice(len(solid.faces), int(share * len(solid.faces)), replace=False)
     tris = solid.vertices[np.vstack([solid.faces, solid.faces[extra]])]
@@ -283,3 +283,34 @@ def test_a_file_is_one_piece_unless_split(tmp_path):
     assert sorted(meshes) == ["ball", "two"]
     meshes, warnings = load_fragments([tmp_path], split=True)
     assert sorted(meshes) == ["ball", "two.1", "two.2"]
+
+
+def _strict(transforms, puzzle_dir) -> float:
+    from reassemble.pipeline import evaluate_files
+
+    scores = evaluate_files(transforms, puzzle_dir / "ground_truth.json")
+    return scores["alignments"]["anchor_largest"]["summary"]["part_acc_strict"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["cells", "soup"])
+def test_puzzle_of_bad_fragments_is_solved_as_well_as_the_clean_one(kind, puzzle_dir, run_dir, tmp_path):
+    """The 4-piece cow, every fragment either cut into cells that keep their walls (as
+    Breaking Bad ships its pieces) or turned into a soup with duplicate and flipped faces."""
+    from reassemble.pipeline import read_puzzle, run_to_folder
+
+    puzzle = read_puzzle(puzzle_dir / "ground_truth.json", with_labels=False)
+    folder = tmp_path / kind
+    folder.mkdir()
+    for k, (name, m) in enumerate(sorted(puzzle.meshes.items())):
+        clean = trimesh.Trimesh(m.vertices, m.faces, process=False)
+        if kind == "cells":
+            bad, _ = cell_union(clean, cells=3, seed=k)
+        else:
+            bad, _ = duplicate_soup(flipped_patches(clean, patches=2, seed=k)[0], share=0.1, seed=k)
+        bad.export(folder / f"{name}.ply")
+    report = run_to_folder([folder], tmp_path / "out", seed=0)
+    assert sum("not a clean closed surface" in w for w in report["warnings"]) == len(puzzle.meshes)
+    assert sorted(report["fragments"]) == sorted(puzzle.meshes)  # one piece per file
+    clean = _strict(run_dir / "transforms.json", puzzle_dir)
+    assert _strict(tmp_path / "out" / "transforms.json", puzzle_dir) >= clean

@@ -242,7 +242,7 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
 
 COARSE = 8  # lattice step (voxels) of the exact winding numbers that check the running sum
 LATTICE_TOL = 0.25  # ... a lattice point further than this from the sum marks its columns
-STRIDE = 4  # in a column's stretch where w varies, exact every this many voxels, linear between
+STRIDE = 8  # in a column's stretch where w varies, exact every this many voxels, linear between
 CONSTANT = 0.02  # a stretch whose ends and middle agree this well is constant
 
 

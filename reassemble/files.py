@@ -181,6 +181,22 @@ def load_mesh(
     )
 
 
+def load_solid(path: str | os.PathLike, *, fill_holes: float | None = None) -> MeshData:
+    """:func:`load_mesh`, and where the surface it finds is not closed (holes left open,
+    seams of overlapping shells), the closed surface of its solid remeshed from the
+    winding number (:func:`repair.solid_mesh`), for what needs a closed 2-manifold
+    (breaking it with booleans). ``MeshData.repairs`` says so."""
+    from .repair import is_closed_solid, solid_mesh
+
+    mesh = load_mesh(path, fill_holes=fill_holes)
+    if is_closed_solid(mesh.faces):
+        return mesh
+    v, f, h = solid_mesh(mesh.vertices, mesh.faces)
+    diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    note = f"remeshed as the closed surface of its solid (marching cubes, voxel {h / diag:.2%} of its size)"
+    return dataclasses.replace(mesh, vertices=v, faces=f, repairs="; ".join(x for x in (mesh.repairs, note) if x))
+
+
 def _encloses(vertices: np.ndarray, repair) -> bool:
     """Whether the kept faces of a repair outweigh (by area) the dangling ones: a solid with
     stray sheets, not a sheet with stray bits."""

@@ -21,6 +21,7 @@ from .files import (
     TRANSFORMS_CONVENTION,
     check_output_folder,
     load_mesh,
+    load_solid,
     mesh_warning,
     read_json,
     read_transforms,
@@ -91,7 +92,7 @@ def break_to_folder(
 
     path = resolve_mesh_path(mesh)
     params.check()
-    data = load_mesh(path, require_closed=True, fill_holes=fill_holes)
+    data = load_solid(path, fill_holes=fill_holes)
     if mesh_warning(data):
         log.warning("%s", mesh_warning(data))
     try:

@@ -314,3 +314,17 @@ def test_puzzle_of_bad_fragments_is_solved_as_well_as_the_clean_one(kind, puzzle
     assert sorted(report["fragments"]) == sorted(puzzle.meshes)  # one piece per file
     clean = _strict(run_dir / "transforms.json", puzzle_dir)
     assert _strict(tmp_path / "out" / "transforms.json", puzzle_dir) >= clean
+
+
+def test_break_takes_the_same_path_and_remeshes_what_stays_open(tmp_path, caplog):
+    from reassemble.pipeline import break_to_folder, read_puzzle
+    from reassemble.synth import BreakParams
+
+    bad, clean = overlapping_shells()
+    bad.export(tmp_path / "shells.ply")
+    with caplog.at_level("WARNING"):
+        out = break_to_folder(tmp_path / "shells.ply", tmp_path / "puzzle", params=BreakParams(pieces=2), seed=0)
+    assert any("inside the solid" in r.message and "remeshed" in r.message for r in caplog.records)
+    puzzle = read_puzzle(out / "ground_truth.json")
+    volume = sum(trimesh.Trimesh(m.vertices, m.faces).volume for m in puzzle.meshes.values())
+    assert volume == pytest.approx(clean.volume, rel=0.02)  # the union, not the two shells' sum

@@ -100,7 +100,8 @@ def main() -> int:
                       f"{str(r['solved']):>6s} {r['seconds']:7.0f}", flush=True)
     for case, rs in rows.items():
         if rs:
-            print(f"mean {case}: strict {np.mean([r['strict'] for r in rs]):.3f}, BB {np.mean([r['bb'] for r in rs]):.3f}, "
+            strict, bb = np.mean([r["strict"] for r in rs]), np.mean([r["bb"] for r in rs])
+            print(f"mean {case}: strict {strict:.3f}, BB {bb:.3f}, "
                   f"solved {sum(r['solved'] for r in rs)}/{len(rs)} ({len(rs)} puzzles)")
     return 0
 

@@ -146,7 +146,7 @@ def load_mesh(
 
         faces = np.asarray(mesh.faces, dtype=np.int64)
         repair = repair_surface(np.asarray(mesh.vertices), faces)
-        if len(repair.faces) == 0 or (repair.dangling and not _encloses(mesh.vertices, repair)):
+        if len(repair.faces) == 0 or repair.dangling > 2 * len(repair.faces):  # mostly sheets bounding nothing
             raise ReassembleError(f"{path}: has no inside (an open sheet: its faces bound no solid, "
                                   "nothing is behind them)")
         if repair.changed:
@@ -195,15 +195,6 @@ def load_solid(path: str | os.PathLike, *, fill_holes: float | None = None) -> M
     diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
     note = f"remeshed as the closed surface of its solid (marching cubes, voxel {h / diag:.2%} of its size)"
     return dataclasses.replace(mesh, vertices=v, faces=f, repairs="; ".join(x for x in (mesh.repairs, note) if x))
-
-
-def _encloses(vertices: np.ndarray, repair) -> bool:
-    """Whether the kept faces of a repair outweigh (by area) the dangling ones: a solid with
-    stray sheets, not a sheet with stray bits."""
-    from .geometry import face_areas
-
-    kept = face_areas(np.asarray(vertices), repair.faces).sum()
-    return bool(kept > 0) and repair.dangling < 2 * len(repair.faces)
 
 
 def mesh_warning(mesh: MeshData) -> str:

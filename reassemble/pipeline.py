@@ -221,7 +221,8 @@ class MatchConfig:
     thin_walls : match as thin-walled sherds along their break strips (:mod:`shells`): None
         when most fragments are (:func:`shells.is_thin_shell`), or always / never
     fill_holes : close the holes of open scans up to this extent, a fraction of each mesh's
-        diagonal (:func:`holes.fill_holes`); None refuses an open mesh
+        diagonal (:func:`holes.fill_holes`); None reads an open mesh as it is (the winding
+        number bridges its holes)
     signature_radii : the fracture signatures use this many of the finest ``radii`` (None:
         all of them); two by default: the coarsest ball reaches past a small contact into
         the air and other fragments, and with it the signatures of small mating faces

@@ -211,8 +211,9 @@ def _ray_sides(scene, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarr
     centroid counted along rays out of its front and out of its back (crossings out
     through a face, along its normal, minus crossings in, to infinity), one pair of rays
     per direction of ``_DIRECTIONS`` not too near the face's plane, the most common count
-    of each side; ``sure`` where all pairs agree, or a majority of at least three. Crossings at the centroid itself (the face, and a copy of it facing the
-    other way) are not counted. Exact for any closed set; a ray through a hole of an open
+    of each side; ``sure`` where all pairs agree, or a majority of at least three.
+    Crossings at the centroid itself (the face, and a copy of it facing the other way)
+    are not counted. Exact for any closed set; a ray through a hole of an open
     one is off by one, which the vote catches."""
     import open3d as o3d
 

@@ -211,7 +211,9 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     if bad.any():
         near = np.zeros((nx, ny), bool)  # the columns of every lattice cell with a bad corner
         for a, b in zip(*np.nonzero(bad)):
-            near[ci[max(a - 1, 0)]:ci[min(a + 1, len(ci) - 1)] + 1, cj[max(b - 1, 0)]:cj[min(b + 1, len(cj) - 1)] + 1] = True
+            i0, i1 = ci[max(a - 1, 0)], ci[min(a + 1, len(ci) - 1)] + 1
+            j0, j1 = cj[max(b - 1, 0)], cj[min(b + 1, len(cj) - 1)] + 1
+            near[i0:i1, j0:j1] = True
         suspect |= near.ravel()
     if suspect.any():
         _exact_columns(w, np.flatnonzero(suspect), ray_ids, k, grid, vertices, faces)
@@ -219,7 +221,9 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     inside = w >= 0.5
     boundary = np.zeros(grid.shape, bool)
     for axis in range(3):
-        change = np.diff(inside, axis=axis)
+        # a jump of w between neighbours is a surface; across a hole it changes smoothly,
+        # and no distance is needed there (the ramp would be flat)
+        change = np.abs(np.diff(w, axis=axis)) > 0.5
         lo = [slice(None)] * 3
         hi = [slice(None)] * 3
         lo[axis], hi[axis] = slice(0, -1), slice(1, None)
@@ -265,8 +269,7 @@ def _exact_columns(w: np.ndarray, columns: np.ndarray, ray_ids: np.ndarray, k: n
     ends = nxt[1:][np.diff(nxt // (nz + 1)) == 0] % (nz + 1)  # the next cut in the same row
     keep = ends > a
     r, a, b = r[keep], a[keep], ends[keep]
-    col = columns[r]
-    i, j = np.unravel_index(col, (nx, ny))
+    i, j = np.unravel_index(columns[r], (nx, ny))
     mid = (a + b - 1) // 2
 
     def at(ii, jj, kk):
@@ -274,17 +277,33 @@ def _exact_columns(w: np.ndarray, columns: np.ndarray, ray_ids: np.ndarray, k: n
 
     sample = at(np.r_[i, i, i], np.r_[j, j, j], np.r_[a, mid, b - 1]).reshape(3, -1)
     constant = np.ptp(sample, axis=0) <= CONSTANT
-    for s in np.flatnonzero(constant):
-        w[col[s], a[s]:b[s]] = sample[1, s]
-    varying = np.flatnonzero(~constant)
-    if len(varying) == 0:
-        return
-    ks = [np.unique(np.r_[np.arange(a[s], b[s], STRIDE), b[s] - 1]) for s in varying]
-    counts = np.array([len(x) for x in ks])
-    values = at(np.repeat(i[varying], counts), np.repeat(j[varying], counts), np.concatenate(ks))
-    offsets = np.r_[0, np.cumsum(counts)]
-    for n, s in enumerate(varying):
-        w[col[s], a[s]:b[s]] = np.interp(np.arange(a[s], b[s]), ks[n], values[offsets[n]:offsets[n + 1]])
+    # every voxel's stretch, start and end
+    x = np.arange(nz)
+    stretch = np.full((len(columns), nz), -1)
+    starts = np.zeros((len(columns), nz), bool)
+    starts[r, a] = True
+    sid = np.cumsum(starts.ravel()) - 1  # stretches are numbered in row-major order of their starts
+    stretch = sid.reshape(len(columns), nz)
+    rows_of = np.broadcast_to(np.arange(len(columns))[:, None], stretch.shape)
+    valid = rows_of == r[stretch]  # voxels before a row's first cut belong to no stretch
+    block = w[columns]
+    cst = valid & constant[stretch]
+    block[cst] = sample[1][stretch[cst]]
+    var = valid & ~constant[stretch]
+    if var.any():
+        s0, s1 = a[stretch], b[stretch] - 1
+        on = var & (((x[None] - s0) % STRIDE == 0) | (x[None] == s1))
+        exact = np.full(block.shape, np.nan)
+        rr, xx = np.nonzero(on)
+        exact[rr, xx] = at(i[stretch[rr, xx]], j[stretch[rr, xx]], xx)
+        lo = s0 + ((x[None] - s0) // STRIDE) * STRIDE
+        hi = np.minimum(lo + STRIDE, s1)
+        span = np.maximum(hi - lo, 1)
+        wt = (x[None] - lo) / span
+        rr, xx = np.nonzero(var)
+        l, h = lo[rr, xx], hi[rr, xx]
+        block[rr, xx] = exact[rr, l] * (1 - wt[rr, xx]) + exact[rr, h] * wt[rr, xx]
+    w[columns] = block
 
 
 def saturated_square(d: np.ndarray, r: float, band: float) -> np.ndarray:

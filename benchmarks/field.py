@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import header, machine_line
+from benchmarks.common import command_line, machine_line
 
 REPO = Path(__file__).resolve().parents[1]
 ALIGN = "anchor_largest"
@@ -241,7 +241,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{len(saved['puzzles'])} puzzles")
         print_tables(saved["figures"])
         return 0
-    header()
+    print(machine_line())
+    print("command: " + command_line())
     commit = _commit()
     halves = [h.strip() for h in args.halves.split(",") if h.strip()]
     if any(h not in HALVES for h in halves):

@@ -253,3 +253,27 @@ def described(gt_path, config, *, cache: bool = True):
         pickle.dump(out, fh, protocol=pickle.HIGHEST_PROTOCOL)
     tmp.replace(path)
     return out
+
+
+def fpfh_baseline(gt_path, *, seed: int) -> tuple[dict, float]:
+    """The Open3D textbook pipeline (:func:`reassemble.baseline.fpfh_assemble`) on a puzzle,
+    scored like ours: (the score of :func:`reassemble.metrics.evaluate`, seconds)."""
+    import numpy as np
+
+    from reassemble.baseline import fpfh_assemble
+    from reassemble.metrics import ScoringFragment, evaluate
+    from reassemble.pipeline import read_puzzle, reference_size
+
+    puzzle = read_puzzle(gt_path, with_labels=False)
+    names = sorted(puzzle.meshes)
+    meshes = [(puzzle.meshes[n].vertices, puzzle.meshes[n].faces) for n in names]
+    t = time.perf_counter()
+    poses = fpfh_assemble(meshes, voxel=reference_size(meshes) / 40, seed=seed)
+    elapsed = time.perf_counter() - t
+    truth = puzzle.ground_truth
+    fragments = [ScoringFragment(n, *meshes[k], np.asarray(truth["fragments"][n]["transform"]))
+                 for k, n in enumerate(names)]
+    pred = {n: {"transform": poses[k], "placed": True} for k, n in enumerate(names)}
+    score = evaluate(fragments, pred, bbox_min=np.array(truth["object"]["bbox_min"]),
+                     bbox_max=np.array(truth["object"]["bbox_max"]))
+    return score, elapsed

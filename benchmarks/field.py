@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import command_line, machine_line
+from benchmarks.common import command_line, fpfh_baseline, machine_line
 
 REPO = Path(__file__).resolve().parents[1]
 ALIGN = "anchor_largest"
@@ -82,22 +82,7 @@ def _segmentation_f1(frag_dir: Path, out: Path, puzzle) -> dict:
 
 
 def _baseline(gt_path: Path, seed: int) -> dict:
-    from reassemble.baseline import fpfh_assemble
-    from reassemble.metrics import ScoringFragment, evaluate
-    from reassemble.pipeline import read_puzzle, reference_size
-
-    puzzle = read_puzzle(gt_path, with_labels=False)
-    names = sorted(puzzle.meshes)
-    meshes = [(puzzle.meshes[n].vertices, puzzle.meshes[n].faces) for n in names]
-    t = time.perf_counter()
-    poses = fpfh_assemble(meshes, voxel=reference_size(meshes) / 40, seed=seed)
-    elapsed = time.perf_counter() - t
-    truth = puzzle.ground_truth
-    fragments = [ScoringFragment(n, *meshes[k], np.asarray(truth["fragments"][n]["transform"]))
-                 for k, n in enumerate(names)]
-    pred = {n: {"transform": poses[k], "placed": True} for k, n in enumerate(names)}
-    score = evaluate(fragments, pred, bbox_min=np.array(truth["object"]["bbox_min"]),
-                     bbox_max=np.array(truth["object"]["bbox_max"]))
+    score, elapsed = fpfh_baseline(gt_path, seed=seed)
     s = score["alignments"][ALIGN]["summary"]
     return {"part_acc_strict": s["part_acc_strict"], "solved": bool(s["solved"]), "time": elapsed}
 

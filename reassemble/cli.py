@@ -534,3 +534,7 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

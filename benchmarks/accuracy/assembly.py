@@ -26,14 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import add_selection, add_signature_radii, match_config, select, start, table
+from benchmarks.common import add_selection, fpfh_baseline, add_signature_radii, match_config, select, start, table
 
 ALIGN = "anchor_largest"
 
 
 def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | None = None) -> dict:
-    from reassemble.metrics import ScoringFragment, evaluate
-    from reassemble.pipeline import evaluate_files, read_puzzle, reference_size, run_to_folder
+    from reassemble.pipeline import evaluate_files, run_to_folder
 
     gt_path = Path(gt_path)
     with tempfile.TemporaryDirectory() as tmp:
@@ -49,20 +48,7 @@ def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | N
            "ours": score["alignments"][ALIGN]["summary"],
            "rot_errors": [f["rotation_error_deg"] for f in score["alignments"][ALIGN]["fragments"].values()]}
     if baseline:
-        from reassemble.baseline import fpfh_assemble
-
-        puzzle = read_puzzle(gt_path, with_labels=False)
-        names = sorted(puzzle.meshes)
-        meshes = [(puzzle.meshes[n].vertices, puzzle.meshes[n].faces) for n in names]
-        t = time.perf_counter()
-        poses = fpfh_assemble(meshes, voxel=reference_size(meshes) / 40, seed=seed)
-        out["base_time"] = time.perf_counter() - t
-        truth = puzzle.ground_truth
-        fragments = [ScoringFragment(n, *meshes[k], np.asarray(truth["fragments"][n]["transform"]))
-                     for k, n in enumerate(names)]
-        pred = {n: {"transform": poses[k], "placed": True} for k, n in enumerate(names)}
-        base = evaluate(fragments, pred, bbox_min=np.array(truth["object"]["bbox_min"]),
-                        bbox_max=np.array(truth["object"]["bbox_max"]))
+        base, out["base_time"] = fpfh_baseline(gt_path, seed=seed)
         out["base"] = base["alignments"][ALIGN]["summary"]
         out["base_rot_errors"] = [f["rotation_error_deg"] for f in base["alignments"][ALIGN]["fragments"].values()]
     return out

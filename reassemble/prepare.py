@@ -125,12 +125,8 @@ def describe_fragments(
     radii = size * np.asarray(config.radii)
     params = config.describe
     noise = [vertex_noise(v) for v, _ in pairs]
-    # noise above a fifth of the finest radius swamps the finest scale: the crease angles,
-    # face normals and finest invariants are noise (0.5 % of the diagonal, 4 pieces:
-    # segmentation F1 0.38-0.83, 2 of 6 sets solved; matched on smoothed copies, with the
-    # tolerance still from the noise of the given surfaces: 5 of 6; benchmarks/robustness.py).
-    # A tenth helped 0.2 % noise (strict 0.72 -> 0.96) but smoothed the low-resolution fish
-    # in 20 pieces with 0.1 % noise below its own facets (solved -> 2 of 20 right)
+    # noise above a fifth of the finest radius swamps the finest scale (crease angles, face
+    # normals, finest invariants): match on smoothed copies (docs/method/descriptors.md, CHANGELOG.md)
     matched, smoothing = _smoothed_copies(pairs, noise, threshold=config.denoise * radii[0])
     if smoothing:
         log.info("vertex noise %.3g x size, over %g x the finest radius: matching on copies smoothed %d times",

@@ -155,7 +155,8 @@ def _add_fill_holes(p, *, dest: str = _SET + "fill_holes") -> None:
     p.add_argument("--fill-holes", type=_fraction, nargs="?", const=FILL_HOLES, dest=dest, metavar="MAX",
                    default=argparse.SUPPRESS if dest.startswith(_SET) else None,
                    help="close the holes of open scans with flat patches, those up to MAX of the mesh's "
-                   f"bounding-box diagonal (default {FILL_HOLES} when given; without it an open mesh is refused)")
+                   f"bounding-box diagonal (default {FILL_HOLES} when given; without it an open mesh is read as it is, "
+                   "its holes bridged by the winding number)")
 
 
 def _thin_walls(text: str) -> bool | None:
@@ -432,6 +433,9 @@ def _add_inputs(p) -> None:
             "walls under 8 %% of their diagonal thick), 'yes' or 'no'")
     _add_fill_holes(p)
     _add_config(p)
+    _option(p, "--split-bodies", "split_bodies", action="store_true", show=None,
+            help="a file holding several separate bodies gives one fragment per body (stem.1, stem.2, "
+            "...); by default a file is one rigid piece")
     _add_common(p)
 
 

@@ -50,7 +50,10 @@ class Config:
     thin_walls : match as thin-walled sherds along their break strips (:mod:`shells`): None
         when most fragments are (:func:`shells.is_thin_shell`), or always / never
     fill_holes : close the holes of open scans up to this extent, a fraction of each mesh's
-        diagonal (:func:`holes.fill_holes`); None refuses an open mesh
+        diagonal (:func:`holes.fill_holes`); None reads an open mesh as it is (the winding
+        number bridges its holes)
+    split_bodies : a file holding several separate bodies gives one fragment per body
+        (else a file is one rigid piece, :func:`inputs.load_fragments`)
     describe, segment, features, registration, assembly : the stages' options
     break_ : the options of ``reassemble break`` (``break`` in JSON and ``--set``); None in a run
     """
@@ -61,6 +64,7 @@ class Config:
     denoise: float = 0.2
     thin_walls: bool | None = None
     fill_holes: float | None = None
+    split_bodies: bool = False
     describe: DescriptorParams = DescriptorParams(with_d2=False, principal=True)
     segment: SegmentParams = SegmentParams()
     features: FeatureParams = FeatureParams()

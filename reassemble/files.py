@@ -7,6 +7,7 @@ renamed over it, so a crash never leaves a half-written file behind.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import logging
 import os
@@ -37,16 +38,20 @@ class MeshData:
     Attributes
     ----------
     vertices : (n, 3) float64
-    faces : (m, 3) int64, counter-clockwise seen from outside
+    faces : (m, 3) int64, counter-clockwise seen from outside (the outer surface: possibly
+        open or non-manifold when the file was not a clean closed mesh)
     path : where it was read from
     filled_holes : the extent of every hole closed on reading (``fill_holes``), a fraction
         of the mesh's diagonal, largest first
+    repairs : what was found and done to get the surface of a solid, "" for a clean closed
+        mesh (:meth:`repair.Repair.summary`)
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     path: Path
     filled_holes: tuple[float, ...] = ()
+    repairs: str = ""
 
 
 def bundled_meshes() -> dict[str, Path]:
@@ -71,22 +76,27 @@ def resolve_mesh_path(spec: str | os.PathLike) -> Path:
 def load_mesh(
     path: str | os.PathLike, *, require_closed: bool = True, weld: bool = True, fill_holes: float | None = None
 ) -> MeshData:
-    """Read a mesh file, weld coincident vertices and check it.
+    """Read a mesh file, weld coincident vertices and find the surface of its solid.
 
     Vertices are welded by position only, so OBJ files whose UV seams split vertices
-    close up again. Faces that collapse (repeated vertex) and duplicate faces are
-    dropped; thin but valid slivers are kept, since removing them would open the mesh.
-    A closed mesh whose faces point inwards is flipped.
+    close up again; faces that collapse (repeated vertex) are dropped, thin but valid
+    slivers kept. A clean closed mesh is kept as it is (flipped if its faces point
+    inwards). Anything else is repaired (:func:`repair.repair_surface`): duplicate faces,
+    walls between cells (a face kept once per side, as Breaking Bad's pieces do) and faces
+    inside overlapping shells or self-intersections are removed, flipped faces turned
+    over; what remains, possibly open or non-manifold, is the surface, and its winding
+    number the inside. ``MeshData.repairs`` says what was found and done, in one line.
 
     Parameters
     ----------
     path : a .ply .obj .stl .off .glb or .gltf file
-    require_closed : refuse meshes that do not bound a solid: boundary edges, edges of an
-        odd number of faces, inconsistent orientation (pinched edges of four faces pass)
+    require_closed : find the surface of a solid as above, refusing a file that has no
+        inside at all (a single open sheet); False reads the faces as they are
     weld : weld and clean as above; ``False`` keeps vertices and faces exactly as stored
         (for files whose per-face data must stay aligned, such as puzzle fragments)
     fill_holes : close holes (open scans) up to this extent, a fraction of the mesh's
-        diagonal, with flat patches (:func:`holes.fill_holes`); None refuses an open mesh
+        diagonal, with flat patches (:func:`holes.fill_holes`); None leaves them open
+        (the winding number bridges them)
 
     Raises
     ------
@@ -112,7 +122,7 @@ def load_mesh(
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ReassembleError(f"{path}: cannot read mesh ({first})") from None
     if faces.ndim != 2 or len(faces) == 0 or len(vertices) < 3:
-        raise ReassembleError(f"{path}: contains no triangles")
+        raise ReassembleError(f"{path}: contains no triangles (a point cloud has no inside)")
     if faces.shape[1] != 3:
         raise ReassembleError(f"{path}: faces are not triangles")
     if not np.all(np.isfinite(vertices)):
@@ -125,52 +135,77 @@ def load_mesh(
         f = mesh.faces
         collapsed = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
         mesh.update_faces(~collapsed)
-        mesh.update_faces(mesh.unique_faces())
         mesh.remove_unreferenced_vertices()
         if len(mesh.faces) == 0:
             raise ReassembleError(f"{path}: all triangles are degenerate")
 
     filled: tuple[float, ...] = ()
-    if require_closed and fill_holes is not None:
-        from .holes import fill_holes as close
-
-        vertices, faces, sizes = close(np.asarray(mesh.vertices), np.asarray(mesh.faces), max_size=fill_holes)
-        if sizes and sizes[0] > fill_holes:
-            raise ReassembleError(
-                f"{path}: has a hole spanning {sizes[0]:.0%} of its size, more than --fill-holes "
-                f"{fill_holes:g} closes (raise it, or fill the hole in a mesh editor)"
-            )
-        filled = tuple(sizes)
-        mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
+    repairs = ""
     if require_closed:
-        # a solid's surface: every edge crossed as often in one direction as in the other.
-        # Edges where four faces meet (two sheets pinched together, as decimation leaves)
-        # pass: inside and outside stay well defined; a hole or a flipped face does not
-        directed = mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-        key, sign = np.sort(directed, axis=1), np.where(directed[:, 0] < directed[:, 1], 1, -1)
-        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-        balance = np.bincount(inverse.ravel(), sign, len(counts))
-        n_open = int(np.sum(counts == 1))
-        n_odd = int(np.sum((counts > 1) & (counts % 2 == 1)))
-        if n_open or n_odd:
-            what = []
-            if n_open:
-                what.append(f"{n_open} boundary edges")
-            if n_odd:
-                what.append(f"{n_odd} edges shared by an odd number of faces")
-            hint = ("a watertight solid is needed: --fill-holes closes holes (an open scan)" if n_open and not n_odd
-                    else "a watertight solid is needed")
-            raise ReassembleError(f"{path}: mesh is not closed after welding ({', '.join(what)}); {hint}")
-        if np.any(balance != 0):
-            raise ReassembleError(f"{path}: inconsistent face orientation (not an oriented solid)")
-        if mesh.volume < 0:
+        from .repair import is_closed_solid, repair_surface
+
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        repair = repair_surface(np.asarray(mesh.vertices), faces)
+        if len(repair.faces) == 0 or repair.dangling > 2 * len(repair.faces):  # mostly sheets bounding nothing
+            raise ReassembleError(f"{path}: has no inside (an open sheet: its faces bound no solid, "
+                                  "nothing is behind them)")
+        if repair.changed:
+            mesh = trimesh.Trimesh(vertices=np.asarray(mesh.vertices), faces=repair.faces, process=False,
+                                   validate=False)
+            mesh.remove_unreferenced_vertices()
+        if fill_holes is not None:
+            from .holes import fill_holes as close
+
+            vertices, faces, sizes = close(np.asarray(mesh.vertices), np.asarray(mesh.faces), max_size=fill_holes)
+            if sizes and sizes[0] > fill_holes:
+                raise ReassembleError(
+                    f"{path}: has a hole spanning {sizes[0]:.0%} of its size, more than --fill-holes "
+                    f"{fill_holes:g} closes (raise it, or leave --fill-holes out: open meshes are read as they are)"
+                )
+            filled = tuple(sizes)
+            mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
+            if filled:
+                repair = dataclasses.replace(repair, holes=0)
+        if is_closed_solid(mesh.faces) and mesh.volume < 0:
             mesh.invert()
+        inverted_only = repair.reoriented == len(faces) and not (
+            repair.duplicates or repair.paired or repair.interior or repair.dangling)
+        if not (inverted_only or not repair.changed and is_closed_solid(faces)):
+            repairs = repair.summary()  # (a clean solid turned inside out is only turned back)
     return MeshData(
         vertices=np.asarray(mesh.vertices, dtype=np.float64).copy(),
         faces=np.asarray(mesh.faces, dtype=np.int64).copy(),
         path=path,
         filled_holes=filled,
+        repairs=repairs,
     )
+
+
+def load_solid(path: str | os.PathLike, *, fill_holes: float | None = None) -> MeshData:
+    """:func:`load_mesh`, and where the surface it finds is not closed (holes left open,
+    seams of overlapping shells), the closed surface of its solid remeshed from the
+    winding number (:func:`repair.solid_mesh`), for what needs a closed 2-manifold
+    (breaking it with booleans). ``MeshData.repairs`` says so."""
+    from .repair import is_closed_solid, solid_mesh
+
+    mesh = load_mesh(path, fill_holes=fill_holes)
+    if is_closed_solid(mesh.faces):
+        return mesh
+    v, f, h = solid_mesh(mesh.vertices, mesh.faces)
+    diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    note = f"remeshed as the closed surface of its solid (marching cubes, voxel {h / diag:.2%} of its size)"
+    return dataclasses.replace(mesh, vertices=v, faces=f, repairs="; ".join(x for x in (mesh.repairs, note) if x))
+
+
+def mesh_warning(mesh: MeshData) -> str:
+    """The one warning line about a mesh read by :func:`load_mesh` ("" when it was clean)."""
+    notes = []
+    if mesh.repairs:
+        notes.append(f"not a clean closed surface: {mesh.repairs}")
+    if mesh.filled_holes:
+        notes.append(f"closed {len(mesh.filled_holes)} hole(s), the largest {mesh.filled_holes[0]:.1%} of its "
+                     "size, with flat patches (an open scan)")
+    return f"{mesh.path}: {'; '.join(notes)}" if notes else ""
 
 
 DEBRIS_SHARE = 0.01  # a body under this share of the largest body's volume is scan debris

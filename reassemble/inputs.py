@@ -9,22 +9,24 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ReassembleError
-from .files import DEBRIS_SHARE, MESH_SUFFIXES, load_mesh, split_bodies
+from .files import DEBRIS_SHARE, MESH_SUFFIXES, load_mesh, mesh_warning, split_bodies
 
 log = logging.getLogger(__name__)
 
 
 def load_fragments(
-    inputs: list[str | Path], *, fill_holes: float | None = None
+    inputs: list[str | Path], *, fill_holes: float | None = None, split: bool = False
 ) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:
     """Read fragment meshes from files and folders; a bad file is skipped with a warning.
 
     Returns the meshes by name and the warnings (one line each). The name is the file
-    stem; a file holding several separate bodies gives one fragment per body (``stem.1``,
-    ``stem.2``, ... largest first; specks under 1 % of the largest's volume are dropped).
+    stem: a file is one rigid piece, whatever its separate bodies. With ``split``, a file
+    holding several separate bodies gives one fragment per body (``stem.1``, ``stem.2``,
+    ... largest first; specks under 1 % of the largest's volume are dropped).
     A fragment identical to one already read (same welded vertices and faces) is skipped.
-    With ``fill_holes``, the holes of open scans are closed (see :func:`files.load_mesh`), with
-    a warning saying how many and how large.
+    A mesh that is not a clean closed surface is repaired (see :func:`files.load_mesh`), with
+    one warning saying what was found and done; with ``fill_holes``, the holes of open
+    scans are closed with flat patches.
     """
     files: list[Path] = []
     for item in inputs:
@@ -45,10 +47,9 @@ def load_fragments(
         except ReassembleError as exc:
             warnings.append(f"skipped: {exc}")
             continue
-        if whole.filled_holes:
-            warnings.append(f"{path}: closed {len(whole.filled_holes)} hole(s), the largest "
-                            f"{whole.filled_holes[0]:.1%} of its size, with flat patches (an open scan)")
-        bodies, debris = split_bodies(whole)
+        if mesh_warning(whole):
+            warnings.append(mesh_warning(whole))
+        bodies, debris = split_bodies(whole) if split else ([whole], 0)
         if debris:
             warnings.append(f"{path}: dropped {debris} tiny separate piece(s) (each under "
                             f"{DEBRIS_SHARE:.0%} of the main body's volume: scan debris)")

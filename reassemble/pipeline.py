@@ -20,7 +20,7 @@ from . import assembly
 from .config import Config
 from .descriptors import DescriptorParams, integral_invariants
 from .errors import ReassembleError
-from .files import check_output_folder, load_mesh, resolve_mesh_path, write_npz
+from .files import check_output_folder, load_mesh, mesh_warning, resolve_mesh_path, write_npz
 from .inputs import load_fragments
 from .outputs import pairs_json, run_report, write_match_folder, write_run_folder
 from .pairs import match_pairs, match_set, registration_params
@@ -111,7 +111,7 @@ def _load(inputs, out, *, config: Config, seed: int | None, force: bool):
     ``seed``, seconds)."""
     t0 = time.perf_counter()
     check_output_folder(out, force=force)
-    meshes, warnings = load_fragments(inputs, fill_holes=config.fill_holes)
+    meshes, warnings = load_fragments(inputs, fill_holes=config.fill_holes, split=config.split_bodies)
     config = config if seed is None else dataclasses.replace(config, seed=seed)
     return meshes, warnings, config, time.perf_counter() - t0
 
@@ -177,6 +177,8 @@ def describe_to_file(
         raise ReassembleError(f"{out}: file exists (use --force to replace it)")
     path = resolve_mesh_path(mesh)
     data = load_mesh(path, require_closed=True, fill_holes=fill_holes)
+    if mesh_warning(data):
+        log.warning("%s", mesh_warning(data))
     radii = np.asarray(radii, dtype=np.float64)
     diag = float(np.linalg.norm(np.ptp(data.vertices, axis=0)))
     if relative:

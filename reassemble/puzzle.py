@@ -15,6 +15,8 @@ from .errors import ReassembleError
 from .files import (
     TRANSFORMS_CONVENTION,
     load_mesh,
+    load_solid,
+    mesh_warning,
     read_json,
     read_transforms,
     resolve_mesh_path,
@@ -45,7 +47,9 @@ def break_to_folder(
     """
     path = resolve_mesh_path(mesh)
     params.check()
-    data = load_mesh(path, require_closed=True, fill_holes=fill_holes)
+    data = load_solid(path, fill_holes=fill_holes)
+    if mesh_warning(data):
+        log.warning("%s", mesh_warning(data))
     try:
         puzzle = break_mesh(data.vertices, data.faces, params, rng=np.random.default_rng(seed))
     except ReassembleError as exc:

@@ -50,10 +50,10 @@ def mixed(puzzle_dir, tmp_path_factory):
     (folder / "random.ply").write_bytes(np.random.default_rng(0).bytes(3000))
     (folder / "nan.ply").write_text(NAN_PLY)
     box = trimesh.creation.box()
-    trimesh.Trimesh(box.vertices, box.faces[:-2]).export(folder / "open.stl")
+    trimesh.Trimesh(box.vertices, box.faces[:2]).export(folder / "open.stl")  # one flat sheet: no inside
     (folder / "notes.txt").write_text("not a mesh")
     before = _digests(folder)
-    rc, out, err = run("run", folder, "--out", root / "out", "--quiet", "--jobs", 1)
+    rc, out, err = run("run", folder, "--out", root / "out", "--quiet", "--jobs", 1, "--split-bodies")
     return folder, root / "out", before, rc, out, err
 
 
@@ -64,7 +64,7 @@ def test_mixed_folder_is_handled_as_documented(mixed):
     assert "Traceback" not in err
     report = json.loads((out / "report.json").read_text())
     warnings = report["warnings"]
-    expect = {"empty.ply": "empty", "random.ply": "cannot read", "nan.ply": "NaN", "open.stl": "not closed",
+    expect = {"empty.ply": "empty", "random.ply": "cannot read", "nan.ply": "NaN", "open.stl": "has no inside",
               "twin.ply": "skipped", "pair.ply": "2 separate bodies"}
     for name, words in expect.items():
         assert any(name in w and words in w for w in warnings), (name, warnings)

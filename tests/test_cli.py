@@ -54,9 +54,18 @@ def test_existing_output_is_refused_then_replaced_with_force(tmp_path):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "staging folders left behind"
 
 
-def _open_mesh(path):
+def _open_box(path):
     box = trimesh.creation.box()
     trimesh.Trimesh(box.vertices, box.faces[:-2]).export(path)
+
+
+def _sheet(path):
+    """A wavy open sheet: faces that bound no solid."""
+    u, v = np.meshgrid(np.linspace(0, 1, 12), np.linspace(0, 1, 12))
+    vertices = np.column_stack([u.ravel(), v.ravel(), 0.1 * np.sin(6 * u.ravel())])
+    q = (np.arange(11)[:, None] * 12 + np.arange(11)[None, :]).ravel()
+    faces = np.concatenate([np.column_stack([q, q + 1, q + 13]), np.column_stack([q, q + 13, q + 12])])
+    trimesh.Trimesh(vertices, faces, process=False).export(path)
 
 
 @pytest.mark.parametrize(
@@ -64,13 +73,13 @@ def _open_mesh(path):
     [
         (lambda p: p.write_bytes(b""), ["empty"]),
         (lambda p: p.write_bytes(np.random.default_rng(0).bytes(2000)), ["cannot read"]),
-        (_open_mesh, ["not closed", "boundary edges"]),
+        (_sheet, ["no inside", "open sheet"]),
         (lambda p: p.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
                                 "property float y\nproperty float z\nelement face 1\n"
                                 "property list uchar int vertex_indices\nend_header\n"
                                 "0 0 0\nnan 1 0\n0 0 1\n3 0 1 2\n"), ["NaN"]),
     ],
-    ids=["empty", "random-bytes", "open", "nan"],
+    ids=["empty", "random-bytes", "sheet", "nan"],
 )
 def test_bad_mesh_gets_one_line_and_is_untouched(tmp_path, make, words):
     path = tmp_path / "bad.ply"
@@ -80,6 +89,18 @@ def test_bad_mesh_gets_one_line_and_is_untouched(tmp_path, make, words):
     assert_one_line_error(rc, err, "bad.ply", *words)
     assert hashlib.sha256(path.read_bytes()).hexdigest() == digest
     assert not (tmp_path / "out").exists()
+
+
+def test_an_open_mesh_is_broken_with_one_warning(tmp_path):
+    path = tmp_path / "open.ply"
+    _open_box(path)
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    rc, _, err = run("break", path, "--pieces", 2, "--out", tmp_path / "out")
+    assert rc == 0
+    warnings = [line for line in err.splitlines() if "open.ply" in line]
+    assert len(warnings) == 1 and "hole" in warnings[0], err
+    assert hashlib.sha256(path.read_bytes()).hexdigest() == digest
+    assert len(list((tmp_path / "out" / "fragments").glob("*.ply"))) == 2
 
 
 def test_bad_options(tmp_path):
@@ -136,14 +157,19 @@ def test_describe_writes_the_documented_arrays(tmp_path):
 
 
 def test_describe_bad_input(tmp_path):
-    _open_mesh(tmp_path / "open.stl")
-    rc, _, err = run("describe", tmp_path / "open.stl", "--radii", "0.1", "--out", tmp_path / "o.npz")
-    assert_one_line_error(rc, err, "open.stl", "not closed")
+    _sheet(tmp_path / "sheet.stl")
+    rc, _, err = run("describe", tmp_path / "sheet.stl", "--radii", "0.1", "--out", tmp_path / "o.npz")
+    assert_one_line_error(rc, err, "sheet.stl", "no inside")
     rc, _, err = run("describe", "torus", "--radii", "-1", "--out", tmp_path / "o.npz")
     assert_one_line_error(rc, err, "positive")
     rc, _, err = run("describe", "torus", "--radii", "1e-4", "--out", tmp_path / "o.npz", "--max-memory", "1G")
     assert_one_line_error(rc, err, "--max-memory")
     assert not (tmp_path / "o.npz").exists()
+    _open_box(tmp_path / "open.stl")  # an open scan: described as it is, its hole bridged
+    rc, _, err = run("describe", tmp_path / "open.stl", "--radii", "0.1", "--relative", "--out", tmp_path / "o.npz")
+    assert rc == 0 and "hole" in err, err
+    with np.load(tmp_path / "o.npz") as z:
+        assert np.isfinite(z["V"]).all()
 
 
 @pytest.mark.slow

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import ReassembleError
 from ..geometry import face_areas, make_scene, sample_surface
+from ..repair import is_closed_solid
 from .kernels import (
     ball_moment_spectra,
     ball_spectra,
@@ -37,7 +38,7 @@ from .kernels import (
     radial_on_grid,
     spline_integration,
 )
-from .voxelize import Grid, make_grid, occupancy, saturated_square, squared_distance
+from .voxelize import Grid, make_grid, occupancy, saturated_square, squared_distance, winding_occupancy
 
 log = logging.getLogger(__name__)
 
@@ -187,11 +188,14 @@ def integral_invariants(
     points: np.ndarray | None = None,
     params: DescriptorParams = DescriptorParams(),
 ) -> Descriptors:
-    """Integral invariants of a closed triangle mesh at several radii.
+    """Integral invariants of a solid bounded by a triangle mesh at several radii.
 
     Parameters
     ----------
-    vertices : (n, 3) float, a closed, outward-oriented mesh (not modified)
+    vertices : (n, 3) float (not modified): a closed, outward-oriented mesh, whose inside is
+        found by ray parity, or any outward surface (open, non-manifold, overlapping: as
+        :func:`repair.repair_surface` leaves it), whose inside is its winding number
+        (:func:`voxelize.winding_occupancy`)
     faces : (f, 3) int
     radii : (m,) kernel radii in mesh units, each > 0 and below the bounding-box diagonal
     points : (q, 3) query points; default the vertices
@@ -224,6 +228,7 @@ def integral_invariants(
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     scene = make_scene(vertices, faces)
+    solid = is_closed_solid(faces)  # else: an open or non-manifold surface (repair.repair_surface)
     timings["bvh"] = time.perf_counter() - t0
 
     n, m = len(points), len(radii)
@@ -243,7 +248,10 @@ def integral_invariants(
         grid = make_grid(bbox_min, bbox_max, h=h, margin=0.5 * radii[idx].max() + 4 * h)
         _check_grid(grid, params.max_memory, f"radius {radii[idx].max():g}")
         t = time.perf_counter()
-        occ = occupancy(scene, grid, width=params.antialias)
+        if solid:
+            occ = occupancy(scene, grid, width=params.antialias)
+        else:
+            occ = winding_occupancy(scene, vertices, faces, grid, width=params.antialias)
         timings["voxelize"] = timings.get("voxelize", 0.0) + time.perf_counter() - t
         t = time.perf_counter()
         spectrum = rfftn(occ, workers=-1)

@@ -87,7 +87,7 @@ def test_open_scanned_fragments_are_reassembled(puzzle_dir, tmp_path):
     scans = tmp_path / "scans"
     punch_holes(puzzle_dir, scans, radius=0.03, seed=3)
     report = run_to_folder([scans], tmp_path / "open", seed=0)  # no --fill-holes: read open
-    assert sum("1 hole(s) left open" in w for w in report["warnings"]) == len(puzzle.meshes)
+    assert sum("1 hole(s) left open" in w for w in report["warnings"]) == len(puzzle.meshes), report["warnings"]
     scores = evaluate_files(tmp_path / "open" / "transforms.json", puzzle_dir / "ground_truth.json")
     assert scores["alignments"]["anchor_largest"]["summary"]["solved"]
     report = run_to_folder([scans], tmp_path / "out", seed=0, config=Config(fill_holes=0.25))

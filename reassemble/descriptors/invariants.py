@@ -239,6 +239,11 @@ def integral_invariants(
         K2c, dir1, normal = np.empty((n, m)), np.empty((n, m, 3)), np.empty((n, m, 3))
     r_min = radii.min()
     level = np.floor(np.log2(radii / r_min) + 1e-9).astype(int)
+    winding = None
+    if not solid:
+        from ..repair import WindingNumber
+
+        winding = WindingNumber(vertices, faces)  # one hierarchy for every grid
     for lev in np.unique(level):
         idx = np.flatnonzero(level == lev)
         h = r_min * 2.0**lev / params.resolution
@@ -251,7 +256,7 @@ def integral_invariants(
         if solid:
             occ = occupancy(scene, grid, width=params.antialias)
         else:
-            occ = winding_occupancy(scene, vertices, faces, grid, width=params.antialias)
+            occ = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding)
         timings["voxelize"] = timings.get("voxelize", 0.0) + time.perf_counter() - t
         t = time.perf_counter()
         spectrum = rfftn(occ, workers=-1)

@@ -144,13 +144,14 @@ def occupancy(scene, grid: Grid, *, width: float = 2.0) -> np.ndarray:
 
 
 def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid, *,
-                      width: float = 2.0) -> np.ndarray:
+                      width: float = 2.0, winding=None) -> np.ndarray:
     """Anti-aliased occupancy of any triangle set, from its generalized winding number.
 
     The same ramp as :func:`occupancy`, ``clip(0.5 - sdf / (width h), 0, 1)``, with the
     distance to the triangles and the side from the winding number ``w`` (inside where
     ``w >= 1/2``); beyond the ramp, ``clip(w, 0, 1)``: 1 where shells overlap, a smooth
-    transition across holes.
+    transition across holes. ``winding``: the set's :class:`repair.WindingNumber`, when the
+    caller evaluates several grids of it (built here otherwise).
 
     Notes
     -----
@@ -173,9 +174,10 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     import open3d as o3d
     from scipy.ndimage import binary_dilation
 
-    from ..repair import winding_number
+    from ..repair import WindingNumber
 
     vertices = np.asarray(vertices, np.float64)
+    winding = winding or WindingNumber(vertices, faces)
     nx, ny, nz = grid.shape
     ua, ub = np.meshgrid(grid.axis(0), grid.axis(1), indexing="ij")
     start = grid.origin[2] - grid.h
@@ -198,14 +200,14 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     ray_ids, t, sign = ray_ids[~dup], t[~dup], sign[~dup]
     u = (t + start - grid.origin[2]) / grid.h
     k = np.clip(np.ceil(u), 0, nz).astype(np.int64)  # first voxel centre past the crossing
-    diff = np.zeros((ua.size, nz + 1), np.int32)
+    diff = np.zeros((ua.size, nz + 1), np.int16)  # |w| <= the faces a column crosses
     np.add.at(diff, (ray_ids, k), sign)
-    w = np.cumsum(diff[:, :nz], axis=1).astype(np.float64)  # (columns, nz)
+    w = np.cumsum(diff[:, :nz], axis=1, dtype=np.int16).astype(np.float32)  # (columns, nz)
     suspect = np.bincount(ray_ids, sign, ua.size) != 0
     # what the running sum cannot see: a coarse lattice of exact values
     ci, cj, ck = (np.unique(np.r_[np.arange(0, n, COARSE), n - 1]) for n in grid.shape)
     I, J, K = np.meshgrid(ci, cj, ck, indexing="ij")
-    wl = winding_number(vertices, faces, grid.origin + grid.h * np.column_stack([I.ravel(), J.ravel(), K.ravel()]))
+    wl = winding(grid.origin + grid.h * np.column_stack([I.ravel(), J.ravel(), K.ravel()]))
     bad = (np.abs(wl - w.reshape(grid.shape)[I.ravel(), J.ravel(), K.ravel()]) > LATTICE_TOL).reshape(I.shape)
     bad = bad.any(axis=2)
     if bad.any():
@@ -216,7 +218,7 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
             near[i0:i1, j0:j1] = True
         suspect |= near.ravel()
     if suspect.any():
-        _exact_columns(w, np.flatnonzero(suspect), ray_ids, k, grid, vertices, faces)
+        _exact_columns(w, np.flatnonzero(suspect), ray_ids, k, grid, winding)
     w = w.reshape(grid.shape)
     inside = w >= 0.5
     boundary = np.zeros(grid.shape, bool)
@@ -238,7 +240,7 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     where = np.flatnonzero(band)
     d = _distances(scene, grid, where)
     ramp = np.clip(0.5 - np.where(inside.ravel()[where], -d, d) / (width * grid.h), 0.0, 1.0)
-    occ = np.clip(w, 0.0, 1.0).astype(np.float32).ravel()
+    occ = np.clip(w, 0.0, 1.0).ravel()
     near_surface = d < 0.5 * width * grid.h
     occ[where[near_surface]] = ramp[near_surface]
     return occ.reshape(grid.shape)
@@ -251,12 +253,10 @@ CONSTANT = 0.02  # a stretch whose ends and middle agree this well is constant
 
 
 def _exact_columns(w: np.ndarray, columns: np.ndarray, ray_ids: np.ndarray, k: np.ndarray, grid: Grid,
-                   vertices: np.ndarray, faces: np.ndarray) -> None:
+                   winding) -> None:
     """Replace, in place, the running sum ``w`` (columns, nz) of the given columns by the
     winding number: per stretch between crossings, the exact value at both ends and the
     middle, and where these differ, every ``STRIDE`` voxels with linear interpolation."""
-    from ..repair import winding_number
-
     nx, ny, nz = grid.shape
     cuts = np.zeros((len(columns), nz + 1), bool)
     row = np.full(nx * ny, -1)
@@ -273,7 +273,7 @@ def _exact_columns(w: np.ndarray, columns: np.ndarray, ray_ids: np.ndarray, k: n
     mid = (a + b - 1) // 2
 
     def at(ii, jj, kk):
-        return winding_number(vertices, faces, grid.origin + grid.h * np.column_stack([ii, jj, kk]))
+        return winding(grid.origin + grid.h * np.column_stack([ii, jj, kk]))
 
     sample = at(np.r_[i, i, i], np.r_[j, j, j], np.r_[a, mid, b - 1]).reshape(3, -1)
     constant = np.ptp(sample, axis=0) <= CONSTANT

@@ -1,7 +1,10 @@
-"""Open fragments, no --fill-holes: every fragment of a bench puzzle scanned with a hole.
+"""Fragments that are no clean solids: every fragment of a bench puzzle scanned with a hole,
+or written as a union of cells keeping the walls between them (as Breaking Bad ships them).
 
-    python -m benchmarks.open_fragments puzzles/bench --pieces 4,8 --meshes spot,torus
-    python -m benchmarks.open_fragments puzzles/bench --hole 0.1 --with-closed
+    python -m benchmarks.accuracy.open_fragments puzzles/bench --pieces 4,8 --meshes spot,torus
+    python -m benchmarks.accuracy.open_fragments puzzles/bench --hole 0.1 --with-closed
+    python -m benchmarks.accuracy.open_fragments puzzles/bench --damage walls --with-closed \
+        --json benchmarks/results/accuracy.cell_walls.json
 
 Each fragment of the selected bench puzzles loses one disc of its original (not fracture)
 surface, ``--hole`` of the fragment's own bounding-box diagonal across (the unit of
@@ -12,18 +15,22 @@ scored against the puzzle's ground truth (only the selected clean puzzles of the
 built, where missing) as `reassemble eval` does (anchored on the
 largest placed fragment): strict part accuracy, Breaking Bad part accuracy, solved.
 ``--with-closed`` also runs the closed fragments, for the same figures side by side.
+``--damage walls``: instead of a hole, the same puzzle broken again with
+``--keep-cell-faces`` (the same cuts, each fragment a union of 4 cells whose walls are
+kept, once per cell), scored against its own ground truth.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import add_selection, header
+from benchmarks.common import add_selection, start, table
 
 ALIGN = "anchor_largest"
 
@@ -68,9 +75,12 @@ def main() -> int:
     add_selection(parser, pieces="4,8")
     parser.add_argument("--hole", type=float, default=0.1, help="hole extent / fragment diagonal (default 0.1)")
     parser.add_argument("--with-closed", action="store_true", help="also run the closed fragments")
+    parser.add_argument("--damage", choices=("hole", "walls"), default="hole",
+                        help="hole: one hole per fragment (default); walls: cell unions keeping their walls")
     args = parser.parse_args()
-    header()
-    from data_synth.make_sets import build_one
+    bench = start()
+    from data_synth.make_sets import break_params, build_one
+    from reassemble.puzzle import break_to_folder
     from data_synth.sets import SETS
 
     pieces = {int(p) for p in args.pieces.split(",")}
@@ -82,27 +92,46 @@ def main() -> int:
         build_one(spec, args.root)
     print(f"{'puzzle':<28s} {'case':<7s} {'hole':>5s} {'strict':>6s} {'BB':>6s} {'solved':>6s} {'time s':>7s}",
           flush=True)
-    rows: dict[str, list[dict]] = {"open": [], "closed": []}
+    rows: dict[str, list[dict]] = {"open" if args.damage == "hole" else "walls": [], "closed": []}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for spec in specs:
             puzzle = args.root / spec.name
             gt = puzzle / "ground_truth.json"
-            extents = punch(puzzle, tmp / spec.name / "open", hole=args.hole, seed=spec.seed)
-            cases = [("open", tmp / spec.name / "open")]
+            if args.damage == "hole":
+                extents = punch(puzzle, tmp / spec.name / "open", hole=args.hole, seed=spec.seed)
+                cases = [("open", tmp / spec.name / "open", gt)]
+            else:
+                extents = [0.0]
+                walls = tmp / spec.name / "walls"
+                break_to_folder(spec.mesh, walls, seed=spec.seed,
+                                params=dataclasses.replace(break_params(spec), keep_cell_faces=True))
+                cases = [("walls", walls / "fragments", walls / "ground_truth.json")]
             if args.with_closed:
-                cases.append(("closed", puzzle / "fragments"))
-            for case, folder in cases:
-                r = score(folder, gt, tmp / spec.name / f"{case}-run")
-                rows[case].append(r)
+                cases.append(("closed", puzzle / "fragments", gt))
+            for case, folder, truth in cases:
+                r = score(folder, truth, tmp / spec.name / f"{case}-run")
+                rows[case].append({"puzzle": spec.name, "hole": max(extents) if case == "open" else None, **r})
                 hole = f"{max(extents):.3f}" if case == "open" else "-"
                 print(f"{spec.name:<28s} {case:<7s} {hole:>5s} {r['strict']:6.3f} {r['bb']:6.3f} "
                       f"{str(r['solved']):>6s} {r['seconds']:7.0f}", flush=True)
+    summary = []
     for case, rs in rows.items():
         if rs:
             strict, bb = np.mean([r["strict"] for r in rs]), np.mean([r["bb"] for r in rs])
-            print(f"mean {case}: strict {strict:.3f}, BB {bb:.3f}, "
-                  f"solved {sum(r['solved'] for r in rs)}/{len(rs)} ({len(rs)} puzzles)")
+            solved = sum(r["solved"] for r in rs)
+            summary.append([case, len(rs), strict, bb, f"{solved}/{len(rs)}"])
+            print(f"mean {case}: strict {strict:.3f}, BB {bb:.3f}, solved {solved}/{len(rs)} ({len(rs)} puzzles)")
+    title = (f"Open fragments: one hole of {args.hole:g} of each fragment's diagonal, no --fill-holes"
+             if args.damage == "hole" else "Cell unions keeping their walls (Breaking Bad's layout), as read")
+    what = (f"open fragments (hole {args.hole:g} of the diagonal)" if args.damage == "hole"
+            else "cell unions with their walls")
+    bench.write(args.json, figures={"damage": args.damage, "hole": args.hole, "puzzles": rows},
+                tables=[table(title,
+                              ["fragments", "puzzles", "strict part accuracy", "BB part accuracy", "solved"],
+                              summary, ["", "d", ".3f", ".3f", ""])],
+                headline=[(f"{what}, strict part accuracy",
+                           f"{summary[0][2]:.3f}")] if summary else [])
     return 0
 
 

@@ -1,9 +1,10 @@
-"""`reassemble run` (defaults) on the field sets, per fracture style and per mesh kind:
-the validation half first, the tuning half beside it.
+"""`reassemble run` (defaults) on the field sets, per fracture style and mesh kind, validation first.
 
-    python -m benchmarks.field --sets puzzles --shared ../shared --jobs 1
-    python -m benchmarks.field --sets puzzles --halves validation --max-pieces 4 --clean-only --resume
-    python -m benchmarks.field --report          # the tables of benchmarks/results/field.json
+The validation half first, the tuning half beside it.
+
+    python -m benchmarks.accuracy.field --sets puzzles --shared ../shared --jobs 1
+    python -m benchmarks.accuracy.field --sets puzzles --halves validation --max-pieces 4 --clean-only --resume
+    python -m benchmarks.accuracy.field --report          # the tables of benchmarks/results/field.json
 
 The sets (``data_synth.sets``: field-validation, field-tuning; split by mesh) live in
 ``SETS/field-validation`` and ``SETS/field-tuning``; the selected puzzles not there yet are
@@ -16,8 +17,9 @@ the run's own fracture labels (its ``analysis.npz``) against the generator's exa
 Time per fragment: the run's wall-clock and CPU time over its fragments. ``--baseline``
 also runs Open3D's textbook FPFH + RANSAC + ICP (``reassemble.baseline``) on the puzzles
 of at most ``--baseline-max-pieces``. Figures go to ``benchmarks/results/field.json``
-(rewritten after every puzzle, so an interrupted run keeps what it measured;
-``--resume`` skips puzzles already in it; every puzzle's row names the commit it ran at).
+(a benchmark record, :mod:`benchmarks.common`: rewritten after every puzzle, so an
+interrupted run keeps what it measured; ``--resume`` skips puzzles already in it; every
+puzzle's row names the commit it ran at).
 """
 
 from __future__ import annotations
@@ -32,9 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import command_line, fpfh_baseline, machine_line
+from benchmarks.common import fpfh_baseline, machine_line, start, table
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 ALIGN = "anchor_largest"
 HALVES = {"validation": "field-validation", "tuning": "field-tuning"}
 
@@ -182,14 +184,40 @@ def print_tables(figs: dict) -> None:
                       f"{b['ours_part_acc_strict_same_puzzles']:.3f})")
 
 
-def _commit() -> str:
-    try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
-                               capture_output=True, text=True).stdout.strip()
-        return sha + ("+changes" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
+def tables(figs: dict) -> list[dict]:
+    """The record's tables: per noise level, by style and by mesh kind, validation first."""
+    cols = ["n", "F1", "strict", "solved", "cpu s/fragment"]
+    out = []
+    for noise in ("clean", "noisy"):
+        for block in ("all", "by_style", "by_kind"):
+            halves = [h for h in ("validation", "tuning") if figs.get(h, {}).get(noise, {}).get("all", {}).get("puzzles")]
+            if not halves:
+                continue
+            keys = ["all"] if block == "all" else sorted(
+                {k for h in halves for k in figs[h][noise].get(block, {})})
+            rows = []
+            for k in keys:
+                row = [k]
+                for h in halves:
+                    g = figs[h][noise]["all"] if block == "all" else figs[h][noise][block].get(k)
+                    row += ([g["puzzles"], g["f1"], g["part_acc_strict"], g["solved"], g["cpu_s_per_fragment"]]
+                            if g and g.get("puzzles") else [None] * 5)
+                b = (figs[halves[0]][noise]["all"] if block == "all" else figs[halves[0]][noise][block].get(k) or {})
+                row.append(b.get("baseline", {}).get("part_acc_strict"))
+                rows.append(row)
+            columns = ["group"] + [f"{h} {c}" for h in halves for c in cols] + [f"{halves[0]} FPFH strict"]
+            formats = [""] + ["d", ".3f", ".3f", ".2f", ".1f"] * len(halves) + [".3f"]
+            title = f"Field set, {noise}, {'all puzzles' if block == 'all' else block.replace('_', ' ')}"
+            out.append(table(title, columns, rows, formats))
+    return out
+
+
+def headline(figs: dict) -> list[tuple[str, str]]:
+    g = figs.get("validation", {}).get("clean", {}).get("all", {})
+    if not g.get("puzzles"):
+        return []
+    return [(f"field validation half, clean ({g['puzzles']} puzzles): segmentation F1 / strict part accuracy",
+             f"{g['f1']:.2f} / {g['part_acc_strict']:.2f}")]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -197,9 +225,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from data_synth.make_sets import DEFAULT_SHARED, build_specs
     from data_synth.sets import FIELD_MESHES, SETS
-    from reassemble.files import write_json
 
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.field", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.accuracy.field", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sets", type=Path, default=REPO / "puzzles",
                         help="folder of the sets: SETS/field-validation, SETS/field-tuning (built if missing)")
@@ -216,19 +243,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline-max-pieces", type=int, default=8)
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once (each run uses one process)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "field.json")
+    parser.add_argument("--json", "--out", dest="out", type=Path, default=REPO / "benchmarks" / "results" / "accuracy.field.json",
+                        help="the record (default benchmarks/results/accuracy.field.json)")
     parser.add_argument("--resume", action="store_true", help="keep the puzzles already in --out")
     parser.add_argument("--report", action="store_true", help="only print the tables of --out, run nothing")
     args = parser.parse_args(argv)
     if args.report:
         saved = json.loads(args.out.read_text())
-        print(f"{args.out}: {saved['machine']}\ncommand: {saved['command']}\ncommit: {saved['commit']}; "
-              f"{len(saved['puzzles'])} puzzles")
-        print_tables(saved["figures"])
+        print(f"{args.out}: {machine_line(saved['machine'])}\ncommand: {saved['command']}\ncommit: {saved['commit']}; "
+              f"{len(saved['figures']['puzzles'])} puzzles")
+        print_tables(saved["figures"]["halves"])
         return 0
-    print(machine_line())
-    print("command: " + command_line())
-    commit = _commit()
+    bench = start()
+    commit = bench.git["commit"] + ("+changes" if bench.git["dirty"] else "") if bench.git["commit"] else "unknown"
     halves = [h.strip() for h in args.halves.split(",") if h.strip()]
     if any(h not in HALVES for h in halves):
         print(f"field: error: --halves takes {', '.join(HALVES)}", file=sys.stderr)
@@ -261,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
     done: dict[tuple[str, str], dict] = {}
     if args.resume and args.out.is_file():
         saved = json.loads(args.out.read_text())
-        done = {(r["half"], r["name"]): r for r in saved.get("puzzles", [])}
+        done = {(r["half"], r["name"]): r for r in saved["figures"].get("puzzles", [])}
     rows = [done[(h, s.name)] for h, s, _ in todo if (h, s.name) in done]
     todo = [t for t in todo if (t[0], t[1].name) not in done]
     todo.sort(key=lambda t: (halves.index(t[0]), t[1].pieces))  # validation first, small puzzles first
@@ -271,10 +298,8 @@ def main(argv: list[str] | None = None) -> int:
 
     def save() -> dict:
         figs = {h: figures([r for r in rows if r["half"] == h]) for h in halves if any(r["half"] == h for r in rows)}
-        write_json(args.out, {"benchmark": "field", "machine": machine_line(),
-                              "command": "python -m benchmarks.field " + " ".join(sys.argv[1:] if argv is None else argv),
-                              "commit": commit, "figures": figs, "puzzles": rows,
-                              "not_generated": not_generated})
+        bench.write(args.out, figures={"halves": figs, "puzzles": rows, "not_generated": not_generated},
+                    tables=tables(figs), headline=headline(figs))
         return figs
 
     t0 = time.perf_counter()

@@ -320,12 +320,12 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_break(sub) -> None:
     p = sub.add_parser(
         "break",
-        help="break a closed mesh into a synthetic puzzle with ground truth",
-        description="Cut a closed mesh into fragments along rough, multi-scale surfaces "
+        help="break a mesh into a synthetic puzzle with ground truth",
+        description="Cut a mesh into fragments along rough, multi-scale surfaces "
         "(manifold3d booleans), pose them at random and write the ground truth. "
         "Lengths are fractions of the object's bounding-box diagonal.",
     )
-    p.add_argument("mesh", help="closed mesh file, or the name of a bundled mesh (e.g. spot, torus)")
+    p.add_argument("mesh", help="mesh file (any triangle set with an inside), or the name of a bundled mesh (e.g. spot, torus)")
     p.add_argument("--pieces", type=_int_at_least(2), required=True, help="number of fragments (>= 2)")
     _option(p, "--seed", "seed", type=_int_at_least(0), help="random seed")
     p.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
@@ -358,13 +358,13 @@ def _add_describe(sub) -> None:
 
     p = sub.add_parser(
         "describe",
-        help="multi-scale integral invariants (V_r, D2_r and curvatures) of a closed mesh",
+        help="multi-scale integral invariants (V_r, D2_r and curvatures) of a mesh",
         description="Integral invariants at every (welded) vertex: V_r (volume of ball and solid), "
         "P_r (its second moment), D2_r (squared distance integral) and the curvatures they give: "
         "H (mean), H_rob (offset-robust mean), K2 = (kappa1 - kappa2)^2. Written to an .npz with "
         "arrays vertices (n x 3), faces, radii (m) and n x m arrays V, P, D2, H, H_rob, K2.",
     )
-    p.add_argument("mesh", help="closed mesh file, or the name of a bundled mesh")
+    p.add_argument("mesh", help="mesh file, or the name of a bundled mesh")
     p.add_argument("--radii", type=_radii, required=True, help="comma-separated kernel radii, mesh units")
     p.add_argument("--relative", action="store_true", help="radii are fractions of the bounding-box diagonal")
     p.add_argument("--out", type=Path, required=True, help="output .npz file")
@@ -490,7 +490,7 @@ def _add_run(sub) -> None:
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
     demo = inspect.signature(demo_to_folder).parameters
     p.add_argument("--mesh", default=demo["mesh"].default,
-                   help="bundled mesh name or a closed mesh file (default %(default)s)")
+                   help="bundled mesh name or a mesh file (default %(default)s)")
     p.add_argument("--pieces", type=_int_at_least(2), default=demo["pieces"].default,
                    help="number of fragments (default %(default)s)")
     p.add_argument("--seed", type=_int_at_least(0), default=demo["seed"].default, help="random seed (default %(default)s)")

@@ -389,6 +389,27 @@ def _like_neighbours(vertices: np.ndarray, faces: np.ndarray, interior: np.ndarr
     return state == 1, state == 2, thin
 
 
+FOLD_SHARE = 0.01  # in a closed surface, a connected group of faces to remove under this share of its area is a fold
+
+
+def _specks(faces: np.ndarray, remove: np.ndarray, area: np.ndarray) -> np.ndarray:
+    """The faces of ``remove`` in edge-connected groups under ``FOLD_SHARE`` of the area."""
+    from .geometry import connected_components, face_adjacency
+
+    idx = np.flatnonzero(remove)
+    if len(idx) == 0:
+        return remove.copy()
+    pairs = face_adjacency(faces)[0]
+    pairs = pairs[remove[pairs[:, 0]] & remove[pairs[:, 1]]]
+    local = np.full(len(faces), -1)
+    local[idx] = np.arange(len(idx))
+    n, label = connected_components(len(idx), local[pairs])
+    small = np.bincount(label, area[idx], n) < FOLD_SHARE * area.sum()
+    out = np.zeros(len(faces), bool)
+    out[idx[small[label]]] = True
+    return out
+
+
 def repair_surface(vertices: np.ndarray, faces: np.ndarray) -> Repair:
     """The outer surface of a triangle set (welded vertices, no collapsed faces).
 
@@ -477,6 +498,12 @@ def repair_surface(vertices: np.ndarray, faces: np.ndarray) -> Repair:
         # a closed solid whose every face the rays read surely has solid on one side only:
         # nothing inside or dangling (the few others are slivers whose normal is noise)
         interior[:], dangling[:] = False, False
+    if is_closed_solid(f):
+        # a noisy closed surface folds over itself in specks of a few faces; removing them
+        # would open as many holes, keeping them costs the ray parity nothing
+        speck = _specks(f, interior | dangling, area)
+        interior &= ~speck
+        dangling &= ~speck
     same = _same_orientation(f, original)
     out = f[~interior & ~dangling]
     reoriented = int(np.sum(~same & ~interior & ~dangling))

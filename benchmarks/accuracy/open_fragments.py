@@ -8,7 +8,8 @@ or written as a union of cells keeping the walls between them (as Breaking Bad s
 
 Each fragment of the selected bench puzzles loses one disc of its original (not fracture)
 surface, ``--hole`` of the fragment's own bounding-box diagonal across (the unit of
-``--fill-holes``), centred on a seeded random face of its original surface. The open
+``--fill-holes``), centred on a seeded random face of its original surface (its triangles
+split first, the surface unchanged, so that a large flat face loses a disc, not itself). The open
 fragments are reassembled as they are (``run_to_folder`` without ``fill_holes``: the
 loader keeps the holes open and the descriptors bridge them with the winding number) and
 scored against the puzzle's ground truth (only the selected clean puzzles of the set are
@@ -38,6 +39,8 @@ ALIGN = "anchor_largest"
 def punch(puzzle_dir: Path, out: Path, *, hole: float, seed: int) -> list[float]:
     """Write the puzzle's fragments to ``out`` with one hole each; the holes' extents
     (fractions of each fragment's diagonal)."""
+    import trimesh
+
     from reassemble.files import write_ply
     from reassemble.holes import boundary_loops
     from reassemble.pipeline import read_puzzle
@@ -48,14 +51,19 @@ def punch(puzzle_dir: Path, out: Path, *, hole: float, seed: int) -> list[float]
     extents = []
     for name, m in sorted(puzzle.meshes.items()):
         diag = float(np.linalg.norm(np.ptp(m.vertices, axis=0)))
-        centres = m.vertices[m.faces].mean(axis=1)
-        at = centres[rng.choice(np.flatnonzero(puzzle.labels[name] == 0))]
+        # triangles split (the surface unchanged) until none is longer than a fifth of the
+        # hole: on a CAD part's large faces, removing whole triangles would cut far more
+        vertices, faces, index = trimesh.remesh.subdivide_to_size(m.vertices, m.faces, 0.2 * hole * diag,
+                                                                  return_index=True)
+        labels = puzzle.labels[name][index]
+        centres = vertices[faces].mean(axis=1)
+        at = centres[rng.choice(np.flatnonzero(labels == 0))]
         keep = np.linalg.norm(centres - at, axis=1) > 0.5 * hole * diag
-        used, faces = np.unique(m.faces[keep], return_inverse=True)
+        used, faces = np.unique(faces[keep], return_inverse=True)
         faces = faces.reshape(-1, 3)
-        write_ply(out / f"{name}.ply", m.vertices[used], faces)
+        write_ply(out / f"{name}.ply", vertices[used], faces)
         loops = boundary_loops(faces)
-        extents.append(max((float(np.linalg.norm(np.ptp(m.vertices[used][lp], axis=0))) / diag for lp in loops),
+        extents.append(max((float(np.linalg.norm(np.ptp(vertices[used][lp], axis=0))) / diag for lp in loops),
                            default=0.0))
     return extents
 

@@ -1,5 +1,7 @@
-"""Fragments that are no clean solids: every fragment of a bench puzzle scanned with a hole,
-or written as a union of cells keeping the walls between them (as Breaking Bad ships them).
+"""Fragments that are no clean solids: scanned with a hole, or cell unions keeping their walls.
+
+Every fragment of a bench puzzle scanned with a hole, or written as a union of cells
+keeping the walls between them (as Breaking Bad ships them).
 
     python -m benchmarks.accuracy.open_fragments puzzles/bench --pieces 4,8 --meshes spot,torus
     python -m benchmarks.accuracy.open_fragments puzzles/bench --hole 0.1 --with-closed

@@ -9,7 +9,7 @@ run computes them (``benchmarks.common.described``, cached beside the set), thei
 and features by :func:`reassemble.segmentation.patch_evidence`, the pipeline's own code;
 a patch's label is the generator's label of most of its area, its weight its share of the
 puzzle's area (every puzzle weighs the same, as in the benchmark's mean F1). The model,
-a scikit-learn ``GradientBoostingClassifier`` with a fixed ``random_state``, is written as
+a scikit-learn ``HistGradientBoostingClassifier`` with a fixed ``random_state``, is written as
 plain tree arrays (:mod:`reassemble.segmenter`) with the command, the commit, the puzzles
 and the feature names. Thin-walled sherds are left out: the pipeline segments them along
 their break strips (``reassemble.shells``), not with this classifier.
@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-PARAMS = dict(n_estimators=300, max_depth=4, learning_rate=0.1, subsample=0.8, min_samples_leaf=20, random_state=0)
+PARAMS = dict(max_iter=200, max_leaf_nodes=15, learning_rate=0.1, min_samples_leaf=40, l2_regularization=1.0,
+              early_stopping=False, random_state=0)
 
 
 def training_specs(half: str = "tuning", *, max_pieces: int = 4) -> list:
@@ -82,10 +83,10 @@ def _commit() -> str:
 
 
 def fit(rows: np.ndarray, label: np.ndarray, weight: np.ndarray, *, params: dict = PARAMS):
-    from sklearn.ensemble import GradientBoostingClassifier
+    from sklearn.ensemble import HistGradientBoostingClassifier
 
-    model = GradientBoostingClassifier(**params)
-    model.fit(rows.astype(np.float32), label.astype(int), sample_weight=weight / weight.mean())
+    model = HistGradientBoostingClassifier(**params)
+    model.fit(rows, label.astype(int), sample_weight=weight / weight.mean())
     return model
 
 
@@ -102,12 +103,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="folder holding data/meshes, to build the set (default ../shared beside the repository)")
     parser.add_argument("--max-pieces", type=int, default=4)
     parser.add_argument("--out", type=Path, default=segmenter.MODEL_PATH)
+    parser.add_argument("--no-build", action="store_true", help="skip the puzzles not built yet (the generator "
+                        "cannot make some: trying again takes minutes)")
     args = parser.parse_args(argv)
     command = "python -m data_synth.train_segmenter " + " ".join(sys.argv[1:] if argv is None else argv)
     root = args.sets / "field-tuning"
     specs = training_specs("tuning", max_pieces=args.max_pieces)
     missing = [s for s in specs if not (root / s.name / "ground_truth.json").is_file()]
-    if missing:
+    if missing and not args.no_build:
         print(f"building {len(missing)} puzzles in {root} ...", flush=True)
         build_specs(missing, root, set_name="field-tuning", shared=args.shared, keep_going=True)
     data, names = [], []
@@ -128,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
             "commit": _commit(), "trained_on": names, "params": PARAMS,
             "sklearn": __import__("sklearn").__version__, "patches": int(len(label))}
     ensemble = segmenter.from_sklearn(model, meta)
-    check = np.abs(ensemble.probability(rows) - model.predict_proba(rows.astype(np.float32))[:, 1]).max()
+    check = np.abs(ensemble.probability(rows) - model.predict_proba(rows)[:, 1]).max()
     if check > 1e-9:
         raise SystemExit(f"train_segmenter: the exported trees differ from scikit-learn's by {check:.3g}")
     segmenter.save(ensemble, args.out)

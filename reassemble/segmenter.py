@@ -149,10 +149,11 @@ def set_features(per_fragment: list[np.ndarray], patch_areas: list[np.ndarray], 
 
 @dataclass(frozen=True)
 class TreeEnsemble:
-    """A boosted tree ensemble as plain arrays: ``sigmoid(init + rate * sum of leaf values)``.
+    """A boosted tree ensemble as plain arrays: ``sigmoid(init + sum of leaf values)``.
 
-    Nodes of all trees are concatenated; ``left`` < 0 marks a leaf. Inputs are compared as
-    float32, as scikit-learn's trees compare them, so the scores match its own.
+    Nodes of all trees are concatenated; ``left`` < 0 marks a leaf, and a row goes left
+    where its feature is at most the node's threshold (as scikit-learn's histogram
+    gradient boosting compares raw float64 inputs, so the scores match its own).
     """
 
     feature: np.ndarray  # (nodes,) int
@@ -162,11 +163,10 @@ class TreeEnsemble:
     value: np.ndarray  # (nodes,) float64, the leaf's value
     roots: np.ndarray  # (trees,) node index of each tree's root
     init: float
-    rate: float
     meta: dict
 
     def decision(self, X: np.ndarray) -> np.ndarray:
-        X = np.asarray(X, dtype=np.float32)
+        X = np.asarray(X, dtype=np.float64)
         total = np.zeros(len(X))
         rows = np.arange(len(X))
         for root in self.roots:
@@ -178,7 +178,7 @@ class TreeEnsemble:
                 go_left = X[rows, self.feature[node]] <= self.threshold[node]
                 node = np.where(inner, np.where(go_left, self.left[node], self.right[node]), node)
             total += self.value[node]
-        return self.init + self.rate * total
+        return self.init + total
 
     def probability(self, X: np.ndarray) -> np.ndarray:
         """(n,) probability of fracture of each row of features."""
@@ -186,32 +186,31 @@ class TreeEnsemble:
 
 
 def from_sklearn(model, meta: dict) -> TreeEnsemble:
-    """The arrays of a fitted binary ``GradientBoostingClassifier`` (default prior init)."""
+    """The arrays of a fitted binary ``HistGradientBoostingClassifier`` (numeric features,
+    no missing values)."""
     feature, threshold, left, right, value, roots = [], [], [], [], [], []
     offset = 0
-    for est in model.estimators_[:, 0]:
-        t = est.tree_
+    for (predictor,) in model._predictors:
+        nodes = predictor.nodes
         roots.append(offset)
-        leaf = t.children_left < 0
-        feature.append(np.where(leaf, 0, t.feature))
-        threshold.append(np.where(leaf, 0.0, t.threshold))
-        left.append(np.where(leaf, -1, t.children_left + offset))
-        right.append(np.where(leaf, -1, t.children_right + offset))
-        value.append(t.value[:, 0, 0])
-        offset += t.node_count
-    prior = model.init_.class_prior_[1]
-    return TreeEnsemble(np.concatenate(feature).astype(np.int32), np.concatenate(threshold),
+        leaf = nodes["is_leaf"].astype(bool)
+        feature.append(np.where(leaf, 0, nodes["feature_idx"]))
+        threshold.append(np.where(leaf, 0.0, nodes["num_threshold"]))
+        left.append(np.where(leaf, -1, nodes["left"].astype(np.int64) + offset))
+        right.append(np.where(leaf, -1, nodes["right"].astype(np.int64) + offset))
+        value.append(np.where(leaf, nodes["value"], 0.0))
+        offset += len(nodes)
+    return TreeEnsemble(np.concatenate(feature).astype(np.int32), np.concatenate(threshold).astype(np.float64),
                         np.concatenate(left).astype(np.int32), np.concatenate(right).astype(np.int32),
-                        np.concatenate(value), np.asarray(roots, np.int32), float(np.log(prior / (1 - prior))),
-                        float(model.learning_rate), meta)
+                        np.concatenate(value).astype(np.float64), np.asarray(roots, np.int32),
+                        float(np.ravel(model._baseline_prediction)[0]), meta)
 
 
 def save(model: TreeEnsemble, path: Path = MODEL_PATH) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "wb") as fh:
         np.savez_compressed(fh, feature=model.feature, threshold=model.threshold, left=model.left, right=model.right,
-                            value=model.value, roots=model.roots, init=np.float64(model.init),
-                            rate=np.float64(model.rate), meta=np.array(json.dumps(model.meta, sort_keys=True)))
+                            value=model.value, roots=model.roots, init=np.float64(model.init), meta=np.array(json.dumps(model.meta, sort_keys=True)))
 
 
 def load(path: Path = MODEL_PATH) -> TreeEnsemble:
@@ -219,7 +218,7 @@ def load(path: Path = MODEL_PATH) -> TreeEnsemble:
     with np.load(path, allow_pickle=False) as z:
         meta = json.loads(str(z["meta"]))
         model = TreeEnsemble(z["feature"], z["threshold"], z["left"], z["right"], z["value"], z["roots"],
-                             float(z["init"]), float(z["rate"]), meta)
+                             float(z["init"]), meta)
     if meta.get("format") != MODEL_FORMAT or tuple(meta.get("features", ())) != FEATURE_NAMES:
         raise ValueError(f"{path}: not a {MODEL_FORMAT} model over this version's features")
     return model

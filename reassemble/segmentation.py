@@ -78,7 +78,7 @@ class SegmentParams:
     min_fracture_share: float = 0.1
     noise_smoothing: int = 5
     merge_angle: float = 45.0
-    method: str = "mixture"
+    method: str = "learned"
 
     def __post_init__(self):
         if self.method not in METHODS:

@@ -30,12 +30,19 @@ PARAMS = dict(max_iter=200, max_leaf_nodes=15, learning_rate=0.1, min_samples_le
               early_stopping=False, random_state=0)
 
 
-def training_specs(half: str = "tuning", *, max_pieces: int = 4) -> list:
+def training_specs(half: str = "tuning", *, max_pieces: int = 4, extra: bool = False) -> list:
     """The puzzles of one field half the classifier learns from (or is scored on): up to
-    ``max_pieces`` pieces, no sherds."""
-    from .sets import FIELD_MESHES, field_set
+    ``max_pieces`` pieces, no sherds. ``extra``: also every style on the half's detailed
+    organic meshes with another seed and count (the kind whose own detail is rougher than
+    a break: three meshes in the half, one of which the generator cannot break)."""
+    from .sets import FIELD_MESHES, FIELD_STYLES, PuzzleSpec, field_set
 
-    return [s for s in field_set(half) if s.pieces <= max_pieces and FIELD_MESHES[s.mesh].kind != "sherds"]
+    specs = [s for s in field_set(half) if s.pieces <= max_pieces and FIELD_MESHES[s.mesh].kind != "sherds"]
+    if extra:
+        meshes = [n for n, m in FIELD_MESHES.items() if m.half == half and m.kind == "detailed organic"]
+        specs += [PuzzleSpec(mesh, 2 + (i + j + 1) % 3, 3, noise=noise, style=style)
+                  for i, mesh in enumerate(meshes) for j, style in enumerate(FIELD_STYLES) for noise in (0.0, 0.001)]
+    return specs
 
 
 def puzzle_rows(gt_path: Path, *, seed: int = 0, smoothing: int = 0) -> dict:
@@ -103,12 +110,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="folder holding data/meshes, to build the set (default ../shared beside the repository)")
     parser.add_argument("--max-pieces", type=int, default=4)
     parser.add_argument("--out", type=Path, default=segmenter.MODEL_PATH)
+    parser.add_argument("--extra", action="store_true", help="also the extra detailed-organic puzzles "
+                        "(training_specs)")
     parser.add_argument("--no-build", action="store_true", help="skip the puzzles not built yet (the generator "
                         "cannot make some: trying again takes minutes)")
     args = parser.parse_args(argv)
     command = "python -m data_synth.train_segmenter " + " ".join(sys.argv[1:] if argv is None else argv)
     root = args.sets / "field-tuning"
-    specs = training_specs("tuning", max_pieces=args.max_pieces)
+    specs = training_specs("tuning", max_pieces=args.max_pieces, extra=args.extra)
     missing = [s for s in specs if not (root / s.name / "ground_truth.json").is_file()]
     if missing and not args.no_build:
         print(f"building {len(missing)} puzzles in {root} ...", flush=True)

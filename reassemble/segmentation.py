@@ -12,10 +12,19 @@ The cues (why each, and what it was measured against: ``docs/method/segmentation
 - **integral-invariant roughness**: the angle between a face's normal and the normal of
   ball ∩ solid at the smallest radius, and ``(κ1 − κ2)² r²`` from its covariance.
 
+Which patches are fracture is decided by one of two kinds of evidence (``segment.method``):
+
+- **learned** (default): a classifier trained offline on generated puzzles of every break
+  style (:mod:`segmenter`) scores each patch from its integral invariants at every radius,
+  fit residuals, rim, convex-hull share and smooth-sheet size, each also relative to its
+  fragment and the set, and the mixture below. "Rougher than the rest" alone inverts on
+  smooth and planar breaks and on detailed originals;
+- **mixture**: the roughness scores alone, as follows.
+
 The two roughness scores are standardized over all fragments of a set, averaged, and
 split by a Gaussian mixture (two or three components by BIC; the roughest is fracture,
 and a middle one overlapping it; exact quadric patches, e.g. CAD faces, are original and
-left out of the fit): the threshold comes from the data, not from the object. A graph
+left out of the fit): the threshold comes from the data, not from the object. Either way a graph
 cut on the patch graph (boundary length, weighted by how smooth the boundary is) then
 removes isolated patches: adjacent patches on one smooth sheet take one label, a sharp
 edge costs little to cut. Patches too small for a quadric fit (under noise a break
@@ -94,7 +103,7 @@ class Segmentation:
     Attributes
     ----------
     fracture : (f,) bool, True on fracture faces
-    probability : (f,) float, the mixture's probability of fracture for the face's patch
+    probability : (f,) float, the evidence's probability of fracture for the face's patch (segment.method)
     patch : (f,) int, patch index per face
     region : (f,) int, fracture region per face (connected fracture faces), -1 on original
     fracture_area, area : float, fracture and total surface area

@@ -12,10 +12,19 @@ The cues (why each, and what it was measured against: ``docs/method/segmentation
 - **integral-invariant roughness**: the angle between a face's normal and the normal of
   ball ∩ solid at the smallest radius, and ``(κ1 − κ2)² r²`` from its covariance.
 
+Which patches are fracture is decided by one of two kinds of evidence (``segment.method``):
+
+- **learned** (default): a classifier trained offline on generated puzzles of every break
+  style (:mod:`segmenter`) scores each patch from its integral invariants at every radius,
+  fit residuals, rim, convex-hull share and smooth-sheet size, each also relative to its
+  fragment and the set, and the mixture below. "Rougher than the rest" alone inverts on
+  smooth and planar breaks and on detailed originals;
+- **mixture**: the roughness scores alone, as follows.
+
 The two roughness scores are standardized over all fragments of a set, averaged, and
 split by a Gaussian mixture (two or three components by BIC; the roughest is fracture,
 and a middle one overlapping it; exact quadric patches, e.g. CAD faces, are original and
-left out of the fit): the threshold comes from the data, not from the object. A graph
+left out of the fit): the threshold comes from the data, not from the object. Either way a graph
 cut on the patch graph (boundary length, weighted by how smooth the boundary is) then
 removes isolated patches: adjacent patches on one smooth sheet take one label, a sharp
 edge costs little to cut. Patches too small for a quadric fit (under noise a break
@@ -35,6 +44,7 @@ from .geometry import connected_components, face_adjacency, face_areas, face_nor
 
 EXACT_QUADRIC = 1e-6  # relative RMS residual below which a patch is a quadric up to rounding
 MERGE_SDS = 1.5  # a middle mixture component this many sds from the roughest is fracture too
+METHODS = ("learned", "mixture")
 
 
 @dataclass(frozen=True)
@@ -59,6 +69,9 @@ class SegmentParams:
     merge_angle : a patch too small for a quadric fit joins the neighbour across its
         flattest boundary when that boundary's mean dihedral angle is under this (degrees;
         0: never), so a real crease stays a boundary
+    method : the patch evidence the graph cut takes: ``"learned"``, the classifier shipped
+        in ``reassemble/data/segmenter.npz`` (:mod:`segmenter`), or ``"mixture"``, the
+        Gaussian mixture of the roughness scores alone
 
     Notes
     -----
@@ -74,6 +87,13 @@ class SegmentParams:
     min_fracture_share: float = 0.1
     noise_smoothing: int = 5
     merge_angle: float = 45.0
+    method: str = "learned"
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            from .errors import ReassembleError
+
+            raise ReassembleError(f"segment.method must be one of {', '.join(METHODS)} (got {self.method!r})")
 
 
 @dataclass
@@ -83,7 +103,7 @@ class Segmentation:
     Attributes
     ----------
     fracture : (f,) bool, True on fracture faces
-    probability : (f,) float, the mixture's probability of fracture for the face's patch
+    probability : (f,) float, the evidence's probability of fracture for the face's patch (segment.method)
     patch : (f,) int, patch index per face
     region : (f,) int, fracture region per face (connected fracture faces), -1 on original
     fracture_area, area : float, fracture and total surface area
@@ -184,18 +204,27 @@ def merge_small_patches(
 
 def quadric_residual(points: np.ndarray, patch_of_point: np.ndarray, n_patches: int, *, min_samples: int):
     """(n_patches,) RMS residual of a least-squares quadric height field per patch, NaN if too few points."""
+    return fit_residuals(points, patch_of_point, n_patches, min_samples=min_samples)[0]
+
+
+def fit_residuals(points: np.ndarray, patch_of_point: np.ndarray, n_patches: int, *, min_samples: int):
+    """(n_patches,) RMS residuals of a least-squares quadric height field and of a plane per
+    patch, NaN where too few points."""
     order = np.argsort(patch_of_point, kind="stable")
     bounds = np.searchsorted(patch_of_point[order], np.arange(n_patches + 1))
     out = np.full(n_patches, np.nan)
+    plane = np.full(n_patches, np.nan)
     for k in np.flatnonzero(np.diff(bounds) >= min_samples):
         x = points[order[bounds[k]:bounds[k + 1]]]
         x = x - x.mean(axis=0)
-        local = x @ np.linalg.svd(x, full_matrices=False)[2].T  # last axis: the patch's normal
+        _, sv, vt = np.linalg.svd(x, full_matrices=False)
+        local = x @ vt.T  # last axis: the patch's normal
         u, v, w = local.T
         A = np.column_stack([u * u, u * v, v * v, u, v, np.ones_like(u)])
         coef, *_ = np.linalg.lstsq(A, w, rcond=None)
         out[k] = np.sqrt(np.mean((w - A @ coef) ** 2))
-    return out
+        plane[k] = sv[-1] / np.sqrt(len(x))
+    return out, plane
 
 
 @dataclass
@@ -208,6 +237,7 @@ class _Fragment:
     patch_area: np.ndarray
     log_residual: np.ndarray  # (patches,) NaN where too few samples
     face_features: np.ndarray  # (f, 2) log normal deviation, log (κ1 − κ2)² r²
+    features: np.ndarray | None = None  # (patches, k) the learned method's own (segmenter.fragment_features)
 
 
 def _weighted_standardize(x: np.ndarray, w: np.ndarray) -> tuple[float, float]:
@@ -259,7 +289,39 @@ def _share(segmentations: list[Segmentation]) -> float:
 def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: int, smoothing: int) -> list[Segmentation]:
     """One segmentation pass; with ``smoothing`` > 0 patches, face normals and quadric fits
     come from Taubin-smoothed vertices (areas from the given ones)."""
+    frags, mixture, rows = patch_evidence(meshes, descriptors, size=size, params=params, seed=seed,
+                                          smoothing=smoothing, learned=params.method == "learned")
+    if rows is not None:
+        from . import segmenter
+
+        model = segmenter.shipped()
+        probs = [model.probability(x) for x in rows]
+    else:
+        probs = mixture
+    out = []
+    for f, prob in zip(frags, probs):
+        label = _tidy(f, prob, params)
+        fracture = label[f.patch]
+        out.append(Segmentation(
+            fracture=fracture, probability=prob[f.patch], patch=f.patch, region=fracture_regions(fracture, f.pairs),
+            fracture_area=float(f.face_area[fracture].sum()), area=float(f.face_area.sum()),
+        ))
+    return out
+
+
+def patch_evidence(meshes, descriptors, *, size: float, params: SegmentParams, seed: int, smoothing: int = 0,
+                   learned: bool = False):
+    """The patches of every fragment and the evidence on them.
+
+    Returns
+    -------
+    frags : list of _Fragment
+    mixture : list of (patches,) the mixture's probability of fracture per patch
+    rows : with ``learned``, list of (patches, k) features (:data:`segmenter.FEATURE_NAMES`), else None
+    """
     from sklearn.mixture import GaussianMixture
+
+    from . import segmenter
 
     rng = np.random.default_rng(seed)
     frags = []
@@ -271,7 +333,7 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
         area = face_areas(given, faces)
         patch_area = np.bincount(patch, area, n_patches)
         samples, face_of_sample = sample_surface(vertices, faces, params.samples, rng=rng)
-        residual = quadric_residual(samples, patch[face_of_sample], n_patches, min_samples=params.min_samples)
+        residual, plane = fit_residuals(samples, patch[face_of_sample], n_patches, min_samples=params.min_samples)
         relative = residual / np.sqrt(np.maximum(patch_area, 1e-300))
         # an exact quadric (a CAD face, a cylinder): original surface, and no evidence for
         # the mixture, whose two components would otherwise split flat from curved
@@ -282,7 +344,16 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
         face_features = np.column_stack([np.log(normal_angle + 1e-2), np.log(k2 + 1e-5)])
         edge_vertices = face_adjacency(faces)[1]
         edge_length = np.linalg.norm(vertices[edge_vertices[:, 0]] - vertices[edge_vertices[:, 1]], axis=1)
-        frags.append(_Fragment(patch, pairs, dihedral, edge_length, area, patch_area, log_residual, face_features))
+        features = None
+        if learned:
+            relative_plane = plane / np.sqrt(np.maximum(patch_area, 1e-300))
+            features = segmenter.fragment_features(
+                vertices, faces, d, patch=patch, pairs=pairs, dihedral=dihedral, edge_length=edge_length,
+                face_area=area, patch_area=patch_area, crease_angle=params.crease_angle,
+                log_quadric=log_residual,
+                log_plane=np.where(relative_plane < EXACT_QUADRIC, -np.inf, np.log(relative_plane + 1e-4)))
+        frags.append(_Fragment(patch, pairs, dihedral, edge_length, area, patch_area, log_residual, face_features,
+                               features))
 
     weights = np.concatenate([f.patch_area for f in frags])
     features = np.concatenate([f.face_features for f in frags])
@@ -323,7 +394,7 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
         if other[1] >= params.min_fracture_share:
             gmm, (rough, share) = fits[1], other
 
-    out = []
+    mixture = []
     for f, score, ex in zip(frags, scores, exact):
         prob = np.zeros(len(score))
         prob[~ex] = gmm.predict_proba(score[~ex, None])[:, rough].sum(axis=1)
@@ -333,13 +404,18 @@ def _segment(meshes, descriptors, *, size: float, params: SegmentParams, seed: i
         small = np.isnan(f.log_residual)
         if not small.all():
             prob[small] = 0.5
-        label = _tidy(f, prob, params)
-        fracture = label[f.patch]
-        out.append(Segmentation(
-            fracture=fracture, probability=prob[f.patch], patch=f.patch, region=fracture_regions(fracture, f.pairs),
-            fracture_area=float(f.face_area[fracture].sum()), area=float(f.face_area.sum()),
-        ))
-    return out
+        mixture.append(prob)
+    if not learned:
+        return frags, mixture, None
+    neighbours = []
+    for f in frags:
+        pu, pv = f.patch[f.pairs[:, 0]], f.patch[f.pairs[:, 1]]
+        cross = pu != pv
+        neighbours.append((np.r_[pu[cross], pv[cross]], np.r_[pv[cross], pu[cross]],
+                           np.r_[f.edge_length[cross], f.edge_length[cross]]))
+    rows = segmenter.set_features([f.features for f in frags], [f.patch_area for f in frags], neighbours,
+                                  mixture, scores)
+    return frags, mixture, rows
 
 
 def _tidy(f: _Fragment, prob: np.ndarray, params: SegmentParams) -> np.ndarray:

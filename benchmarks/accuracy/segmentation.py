@@ -2,6 +2,7 @@
 
     python -m benchmarks.accuracy.segmentation puzzles/bench                    # 2, 4, 8 pieces, seed 0, clean + noisy
     python -m benchmarks.accuracy.segmentation puzzles/bench --noisy-only --jobs 2
+    python -m benchmarks.accuracy.segmentation puzzles/bench --method mixture   # the unsupervised mixture
 
 The descriptors of every puzzle are computed once and cached beside the set
 (``benchmarks.common.described``: keyed by the fragments, the options and the descriptor
@@ -22,15 +23,20 @@ import numpy as np
 from benchmarks.common import add_selection, described, select, start, table
 
 
-def run_puzzle(gt_path: str, seed: int) -> dict:
+def run_puzzle(gt_path: str, seed: int, method: str | None = None) -> dict:
+    import dataclasses
+
     from reassemble.geometry import face_areas
     from reassemble.pipeline import Config, prepare_fragments, read_puzzle
 
+    config = Config()
+    if method is not None:
+        config = dataclasses.replace(config, segment=dataclasses.replace(config.segment, method=method))
     t = time.perf_counter()
-    ds = described(gt_path, Config())
+    ds = described(gt_path, config)
     t_describe = time.perf_counter() - t
     t = time.perf_counter()
-    frags, _ = prepare_fragments({}, described=ds, seed=seed)
+    frags, _ = prepare_fragments({}, described=ds, seed=seed, config=config)
     t_segment = time.perf_counter() - t
     labels = read_puzzle(gt_path).labels
     truth = [labels[f.name].astype(bool) for f in frags]
@@ -55,6 +61,7 @@ def _scores(truth: np.ndarray, pred: np.ndarray, area: np.ndarray) -> tuple[floa
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_selection(parser, pieces="2,4,8")
+    parser.add_argument("--method", default=None, help="segment.method (default: Config's)")
     args = parser.parse_args()
     run = start()
     specs = select(args)
@@ -64,7 +71,7 @@ def main() -> int:
     t0 = time.perf_counter()
     results = []
     with ProcessPoolExecutor(args.jobs) as pool:
-        for r in pool.map(run_puzzle, paths, [args.seed] * len(paths)):
+        for r in pool.map(run_puzzle, paths, [args.seed] * len(paths), [args.method] * len(paths)):
             results.append(r)
             f1w, name = r["worst"]
             print(f"{r['name']:<36s} {r['fragments']:>5d} {r['f1']:>6.3f} {r['precision']:>6.3f} {r['recall']:>6.3f} "

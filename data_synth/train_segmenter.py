@@ -1,0 +1,153 @@
+"""Train the segmentation classifier shipped as ``reassemble/data/segmenter.npz``.
+
+    python -m data_synth.train_segmenter --sets puzzles --shared ../shared
+
+Training puzzles are the field-tuning half only (``data_synth.sets``: every break style,
+clean and with 0.1 % scan noise, 2-4 pieces; the validation half's meshes are never
+seen), built into ``SETS/field-tuning`` if missing. Their descriptors are computed as a
+run computes them (``benchmarks.common.described``, cached beside the set), their patches
+and features by :func:`reassemble.segmentation.patch_evidence`, the pipeline's own code;
+a patch's label is the generator's label of most of its area, its weight its share of the
+puzzle's area (every puzzle weighs the same, as in the benchmark's mean F1). The model,
+a scikit-learn ``HistGradientBoostingClassifier`` with a fixed ``random_state``, is written as
+plain tree arrays (:mod:`reassemble.segmenter`) with the command, the commit, the puzzles
+and the feature names. Thin-walled sherds are left out: the pipeline segments them along
+their break strips (``reassemble.shells``), not with this classifier.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+PARAMS = dict(max_iter=200, max_leaf_nodes=15, learning_rate=0.1, min_samples_leaf=40, l2_regularization=1.0,
+              early_stopping=False, random_state=0)
+
+
+def training_specs(half: str = "tuning", *, max_pieces: int = 4, extra: bool = False) -> list:
+    """The puzzles of one field half the classifier learns from (or is scored on): up to
+    ``max_pieces`` pieces, no sherds. ``extra``: also every style on the half's detailed
+    organic meshes with another seed and count (the kind whose own detail is rougher than
+    a break: three meshes in the half, one of which the generator cannot break)."""
+    from .sets import FIELD_MESHES, FIELD_STYLES, PuzzleSpec, field_set
+
+    specs = [s for s in field_set(half) if s.pieces <= max_pieces and FIELD_MESHES[s.mesh].kind != "sherds"]
+    if extra:
+        meshes = [n for n, m in FIELD_MESHES.items() if m.half == half and m.kind == "detailed organic"]
+        specs += [PuzzleSpec(mesh, 2 + (i + j + 1) % 3, 3, noise=noise, style=style)
+                  for i, mesh in enumerate(meshes) for j, style in enumerate(FIELD_STYLES) for noise in (0.0, 0.001)]
+    return specs
+
+
+def puzzle_rows(gt_path: Path, *, seed: int = 0, smoothing: int = 0) -> dict:
+    """Patches, features and labels of one puzzle, segmented as a run segments it.
+
+    Returns a dict: ``rows`` (patches, k) features, ``label`` (patches,) bool, ``weight``
+    (patches,) area share, ``mixture`` (patches,) the mixture's probability, and for
+    scoring the graph cut: ``frags`` (segmentation._Fragment list), ``truth`` (faces,) bool.
+    """
+    from benchmarks.common import described
+    from reassemble.config import Config
+    from reassemble.pipeline import read_puzzle
+    from reassemble.segmentation import patch_evidence
+
+    config = Config()
+    ds = described(gt_path, config)
+    labels = read_puzzle(gt_path).labels
+    good = [k for k, d in enumerate(ds.descriptors) if d is not None]
+    frags, mixture, rows = patch_evidence([(ds.matched[k], ds.meshes[k][1]) for k in good],
+                                          [ds.descriptors[k] for k in good], size=ds.size, params=config.segment,
+                                          seed=seed, smoothing=smoothing, learned=True)
+    total = sum(float(f.face_area.sum()) for f in frags)
+    label, weight, truth = [], [], []
+    for k, f in zip(good, frags):
+        t = labels[ds.names[k]] == 1
+        n = len(f.patch_area)
+        share = np.bincount(f.patch, f.face_area * t, n) / np.maximum(f.patch_area, 1e-300)
+        label.append(share > 0.5)
+        weight.append(f.patch_area / total)
+        truth.append(t)
+    return {"rows": np.concatenate(rows), "label": np.concatenate(label), "weight": np.concatenate(weight),
+            "mixture": np.concatenate(mixture), "frags": frags, "truth": truth, "per_fragment_rows": rows,
+            "per_fragment_mixture": mixture}
+
+
+def _commit() -> str:
+    try:
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True,
+                             check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
+                               capture_output=True, text=True).stdout.strip()
+        return sha + ("+changes" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def fit(rows: np.ndarray, label: np.ndarray, weight: np.ndarray, *, params: dict = PARAMS):
+    from sklearn.ensemble import HistGradientBoostingClassifier
+
+    model = HistGradientBoostingClassifier(**params)
+    model.fit(rows, label.astype(int), sample_weight=weight / weight.mean())
+    return model
+
+
+def main(argv: list[str] | None = None) -> int:
+    from reassemble import segmenter
+
+    from .make_sets import DEFAULT_SHARED, build_specs
+
+    parser = argparse.ArgumentParser(prog="python -m data_synth.train_segmenter", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--sets", type=Path, default=REPO / "puzzles",
+                        help="folder of the sets: SETS/field-tuning (built if missing)")
+    parser.add_argument("--shared", type=Path, default=DEFAULT_SHARED,
+                        help="folder holding data/meshes, to build the set (default ../shared beside the repository)")
+    parser.add_argument("--max-pieces", type=int, default=4)
+    parser.add_argument("--out", type=Path, default=segmenter.MODEL_PATH)
+    parser.add_argument("--extra", action="store_true", help="also the extra detailed-organic puzzles "
+                        "(training_specs)")
+    parser.add_argument("--no-build", action="store_true", help="skip the puzzles not built yet (the generator "
+                        "cannot make some: trying again takes minutes)")
+    args = parser.parse_args(argv)
+    command = "python -m data_synth.train_segmenter " + " ".join(sys.argv[1:] if argv is None else argv)
+    root = args.sets / "field-tuning"
+    specs = training_specs("tuning", max_pieces=args.max_pieces, extra=args.extra)
+    missing = [s for s in specs if not (root / s.name / "ground_truth.json").is_file()]
+    if missing and not args.no_build:
+        print(f"building {len(missing)} puzzles in {root} ...", flush=True)
+        build_specs(missing, root, set_name="field-tuning", shared=args.shared, keep_going=True)
+    data, names = [], []
+    t0 = time.perf_counter()
+    for s in specs:
+        gt = root / s.name / "ground_truth.json"
+        if not gt.is_file():
+            print(f"  not generated: {s.name}", flush=True)
+            continue
+        data.append(puzzle_rows(gt))
+        names.append(s.name)
+        print(f"  {s.name}: {len(data[-1]['label'])} patches ({time.perf_counter() - t0:.0f} s)", flush=True)
+    rows = np.concatenate([d["rows"] for d in data])
+    label = np.concatenate([d["label"] for d in data])
+    weight = np.concatenate([d["weight"] for d in data])
+    model = fit(rows, label, weight)
+    meta = {"format": segmenter.MODEL_FORMAT, "features": list(segmenter.FEATURE_NAMES), "command": command,
+            "commit": _commit(), "trained_on": names, "params": PARAMS,
+            "sklearn": __import__("sklearn").__version__, "patches": int(len(label))}
+    ensemble = segmenter.from_sklearn(model, meta)
+    check = np.abs(ensemble.probability(rows) - model.predict_proba(rows)[:, 1]).max()
+    if check > 1e-9:
+        raise SystemExit(f"train_segmenter: the exported trees differ from scikit-learn's by {check:.3g}")
+    segmenter.save(ensemble, args.out)
+    print(f"{args.out}: {len(names)} puzzles, {len(label)} patches, {len(ensemble.roots)} trees "
+          f"({args.out.stat().st_size / 1024:.0f} KiB) in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

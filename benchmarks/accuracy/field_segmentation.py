@@ -9,7 +9,7 @@ fragments are described as a run describes them (cached beside the set,
 ``benchmarks.common.described``) and segmented as a run segments them
 (:func:`reassemble.prepare.segment_set`: sherds along their break strips, solids all
 together) with each ``segment.method``; the area-weighted F1 of the fracture label is
-scored against the generator's exact labels. Much cheaper than ``benchmarks.field`` (no
+scored against the generator's exact labels. Much cheaper than ``benchmarks.accuracy.field`` (no
 matching): the loop for studying segmentation across styles.
 """
 
@@ -143,11 +143,20 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n{group}:  {'puzzles':>7s} " + " ".join(f"{m:>8s}" for m in methods))
         for line in body:
             print(f"  {line[0]:<28s} {line[1]:>5d} " + " ".join(f"{x:>8.3f}" for x in line[2:]))
-    headline = [(f"Segmentation F1, field {g} ({per[methods[-1]]['all']['puzzles']} puzzles, {methods[-1]})",
-                 f"{per[methods[-1]]['all']['f1']:.3f}") for g, per in figs.items()]
+    headline = headline_rows(figs, methods)
     run.write(args.json, figures={"groups": figs, "puzzles": rows, "methods": methods}, tables=tables,
               headline=headline)
     return 0
+
+
+def headline_rows(figs: dict, methods: list[str]) -> list[tuple[str, str]]:
+    """One README row per group: F1 of every method, the default (``SegmentParams().method``) named."""
+    from reassemble.segmentation import SegmentParams
+
+    default = SegmentParams().method
+    names = " / ".join(m + (" (default)" if m == default else "") for m in methods)
+    return [(f"Segmentation F1, field {g} ({per[methods[-1]]['all']['puzzles']} puzzles), {names}",
+             " / ".join(f"{per[m]['all']['f1']:.3f}" for m in methods)) for g, per in figs.items()]
 
 
 if __name__ == "__main__":

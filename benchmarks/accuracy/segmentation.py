@@ -101,7 +101,8 @@ def main() -> int:
               [[r["name"], r["fragments"], r["f1"], r["precision"], r["recall"], r["true_share"], r["worst"]["f1"]]
                for r in results], ["", "d", ".3f", ".3f", ".3f", ".3f", ".3f"]),
     ]
-    headline = [(f"Segmentation F1 ({x['group']}, {x['puzzles']} {args.set} puzzles of {args.pieces} pieces)",
+    method = f", segment.method={args.method}" if args.method else ""
+    headline = [(f"Segmentation F1 ({x['group']}, {x['puzzles']} {args.set} puzzles of {args.pieces} pieces{method})",
                  f"{x['f1_mean']:.3f} (target >= 0.95)")
                 for x in summary if x["group"] != "all"]
     run.write(args.json, figures={"summary": summary, "puzzles": results, "jobs": args.jobs},

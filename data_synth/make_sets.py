@@ -6,7 +6,7 @@
 
 Each puzzle is a ``reassemble break`` output folder; ``index.json`` lists them. Puzzles
 already built (same spec) are kept, so an interrupted build resumes. The field sets break
-meshes from ``--shared`` (default ``../shared`` beside the repository) too; every field
+meshes from ``--shared`` (a folder holding data/meshes; without it those meshes are skipped) too; every field
 mesh is first written to ``<out>/_sources/<mesh>.ply`` as it is broken (simplified when
 large, see ``data_synth.sets.FIELD_MAX_FACES``), which is also what the puzzles' ground
 truth names as their source.
@@ -29,7 +29,7 @@ from reassemble.synth import BreakParams
 
 from .sets import FIELD_MAX_FACES, FIELD_MESHES, FIELD_TARGET_FACES, SETS, PuzzleSpec
 
-DEFAULT_SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+DEFAULT_SHARED = None  # the third-party meshes are read only from a folder given as --shared
 
 
 def break_params(spec: PuzzleSpec) -> BreakParams:
@@ -80,7 +80,7 @@ def simplified(vertices, faces, target_faces: int):
     return np.asarray(mesh.vert_properties)[:, :3].copy(), np.asarray(mesh.tri_verts, dtype=np.int64).copy()
 
 
-def prepare_source(mesh: str, root: Path, shared: Path) -> Path:
+def prepare_source(mesh: str, root: Path, shared: Path | None) -> Path:
     """``root/_sources/<mesh>.ply``: the field mesh as broken (written once)."""
     from reassemble.files import load_mesh, resolve_mesh_path, write_ply
 
@@ -94,7 +94,10 @@ def prepare_source(mesh: str, root: Path, shared: Path) -> Path:
         vertices, faces = getattr(shapes, source.split(":", 1)[1])()
     else:
         if source.startswith("shared:"):
-            path = shared / "data" / "meshes" / source.split(":", 1)[1]
+            if shared is None:
+                raise ReassembleError(f"{mesh}: a third-party mesh that is not bundled (its license does not "
+                                      "allow it): give --shared, the folder holding data/meshes")
+            path = Path(shared) / "data" / "meshes" / source.split(":", 1)[1]
             if not path.is_file():
                 raise ReassembleError(f"{path}: no such file (the field sets need --shared, the folder "
                                       "holding data/meshes)")
@@ -119,7 +122,7 @@ def _build_or_note(spec: PuzzleSpec, root: Path, force: bool, mesh) -> dict:
 
 
 def build_specs(specs: list[PuzzleSpec], root: Path, *, set_name: str, jobs: int = 1, force: bool = False,
-                shared: Path = DEFAULT_SHARED, keep_going: bool = False) -> list[dict]:
+                shared: Path | None = DEFAULT_SHARED, keep_going: bool = False) -> list[dict]:
     """Build these puzzles of the set ``set_name`` into ``root`` (kept where built already).
 
     ``keep_going``: a puzzle the generator cannot make gets an ``error`` entry instead of
@@ -128,7 +131,7 @@ def build_specs(specs: list[PuzzleSpec], root: Path, *, set_name: str, jobs: int
     root.mkdir(parents=True, exist_ok=True)
     meshes = [None] * len(specs)
     if set_name.startswith("field"):
-        sources = {m: prepare_source(m, root, Path(shared)) for m in sorted({s.mesh for s in specs})}
+        sources = {m: prepare_source(m, root, shared) for m in sorted({s.mesh for s in specs})}
         meshes = [sources[s.mesh] for s in specs]
     order = sorted(range(len(specs)), key=lambda k: -specs[k].pieces)  # the longest first
     args = ([specs[k] for k in order], [root] * len(specs), [force] * len(specs), [meshes[k] for k in order])
@@ -144,7 +147,7 @@ def build_specs(specs: list[PuzzleSpec], root: Path, *, set_name: str, jobs: int
     return results
 
 
-def build_set(name: str, root: Path, *, jobs: int = 1, force: bool = False, shared: Path = DEFAULT_SHARED,
+def build_set(name: str, root: Path, *, jobs: int = 1, force: bool = False, shared: Path | None = DEFAULT_SHARED,
               keep_going: bool = False) -> list[dict]:
     """Build the set ``name`` into ``root`` and write its ``index.json`` (with
     ``keep_going``, puzzles the generator could not make are listed apart, not indexed)."""
@@ -168,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--force", action="store_true", help="rebuild puzzles that exist")
     parser.add_argument("--shared", type=Path, default=DEFAULT_SHARED,
-                        help="folder holding data/meshes, for the field sets (default ../shared beside the repository)")
+                        help="folder holding data/meshes, for the field sets (the field sets' third-party meshes; without it they are skipped)")
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     try:

@@ -7,7 +7,8 @@ sherds: the thin-walled pot x {4, 8, 12} pieces x three seeds, plus scan-noise v
 field-tuning, field-validation: every fracture style x meshes of every kind (smooth and
 detailed organic, CAD, thin parts, sherds) x 2-20 pieces, clean and with scan noise, split
 by mesh into a half to tune on and a half to report (see :data:`FIELD_MESHES`). Their
-meshes come from the package and from ``../shared/data/meshes`` (``--shared``).
+meshes come from the package and, for those whose license forbids bundling them, from a
+folder given as ``--shared`` (holding ``data/meshes``; the project never looks for one itself).
 """
 
 from __future__ import annotations

@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sets", type=Path, default=REPO / "puzzles",
                         help="folder of the sets: SETS/field-tuning (built if missing)")
     parser.add_argument("--shared", type=Path, default=DEFAULT_SHARED,
-                        help="folder holding data/meshes, to build the set (default ../shared beside the repository)")
+                        help="folder holding data/meshes, to build the set (the third-party meshes; without it they are skipped)")
     parser.add_argument("--max-pieces", type=int, default=4)
     parser.add_argument("--out", type=Path, default=segmenter.MODEL_PATH)
     parser.add_argument("--extra", action="store_true", help="also the extra detailed-organic puzzles "

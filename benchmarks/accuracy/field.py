@@ -231,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sets", type=Path, default=REPO / "puzzles",
                         help="folder of the sets: SETS/field-validation, SETS/field-tuning (built if missing)")
     parser.add_argument("--shared", type=Path, default=DEFAULT_SHARED,
-                        help="folder holding data/meshes, to build the sets (default ../shared beside the repository)")
+                        help="folder holding data/meshes, to build the sets (the third-party meshes; without it they are skipped)")
     parser.add_argument("--halves", default="validation,tuning", help="which halves, in this order")
     parser.add_argument("--styles", default=None, help="comma-separated styles (e.g. cells,'fractal r0.01')")
     parser.add_argument("--kinds", default=None, help="comma-separated mesh kinds")

@@ -8,7 +8,8 @@ writes ``benchmarks/results/<name>.json`` (see :mod:`benchmarks.common`); this s
 reads them all and writes one section per benchmark: its provenance (command, commit,
 date, machine) and its tables. A benchmark without a JSON file is listed with the command
 that would produce one. The README's table between the ``results:begin`` and
-``results:end`` markers is made from the records' headline rows, so no figure is copied
+``results:end`` markers is made from the headline rows of each benchmark's own record
+(``<name>.json``; variants written elsewhere with ``--json`` only in docs/results.md), so no figure is copied
 by hand.
 """
 
@@ -134,7 +135,10 @@ def anchor(name: str) -> str:
 def readme_block(benches: list[dict], recs: dict[str, list[dict]]) -> str:
     rows = ["| measured | figure | benchmark |", "| --- | --- | --- |"]
     for b in benches:
+        # the benchmark's own record (<name>.json); variants written with --json are in docs/results.md
         for rec in recs.get(b["name"], []):
+            if Path(rec["_file"]).name != f"{b['name']}.json":
+                continue
             for what, value in rec.get("headline", []):
                 rows.append(f"| {what} | {value} | [{b['name']}](docs/results.md#{anchor(b['name'])}) |")
     if len(rows) == 2:

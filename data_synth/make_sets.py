@@ -80,6 +80,16 @@ def simplified(vertices, faces, target_faces: int):
     return np.asarray(mesh.vert_properties)[:, :3].copy(), np.asarray(mesh.tri_verts, dtype=np.int64).copy()
 
 
+def add_field_options(parser, *, sets: str = "SETS/field-validation, SETS/field-tuning") -> None:
+    """``--sets`` (the folder of the field sets, built where missing) and ``--shared``, the
+    options of everything that builds them."""
+    parser.add_argument("--sets", type=Path, default=Path(__file__).resolve().parents[1] / "puzzles",
+                        help=f"folder of the sets: {sets} (built if missing)")
+    parser.add_argument("--shared", type=Path, default=DEFAULT_SHARED,
+                        help="folder holding data/meshes, for the field sets' third-party meshes (without it "
+                        "they are skipped)")
+
+
 def prepare_source(mesh: str, root: Path, shared: Path | None) -> Path:
     """``root/_sources/<mesh>.ply``: the field mesh as broken (written once)."""
     from reassemble.files import load_mesh, resolve_mesh_path, write_ply

@@ -100,14 +100,11 @@ def fit(rows: np.ndarray, label: np.ndarray, weight: np.ndarray, *, params: dict
 def main(argv: list[str] | None = None) -> int:
     from reassemble import segmenter
 
-    from .make_sets import DEFAULT_SHARED, build_specs
+    from .make_sets import add_field_options, build_specs
 
     parser = argparse.ArgumentParser(prog="python -m data_synth.train_segmenter", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sets", type=Path, default=REPO / "puzzles",
-                        help="folder of the sets: SETS/field-tuning (built if missing)")
-    parser.add_argument("--shared", type=Path, default=DEFAULT_SHARED,
-                        help="folder holding data/meshes, to build the set (the third-party meshes; without it they are skipped)")
+    add_field_options(parser, sets="SETS/field-tuning")
     parser.add_argument("--max-pieces", type=int, default=4)
     parser.add_argument("--out", type=Path, default=segmenter.MODEL_PATH)
     parser.add_argument("--extra", action="store_true", help="also the extra detailed-organic puzzles "

@@ -223,15 +223,12 @@ def headline(figs: dict) -> list[tuple[str, str]]:
 def main(argv: list[str] | None = None) -> int:
     import sys
 
-    from data_synth.make_sets import DEFAULT_SHARED, build_specs
+    from data_synth.make_sets import add_field_options, build_specs
     from data_synth.sets import FIELD_MESHES, SETS
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks.accuracy.field", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sets", type=Path, default=REPO / "puzzles",
-                        help="folder of the sets: SETS/field-validation, SETS/field-tuning (built if missing)")
-    parser.add_argument("--shared", type=Path, default=DEFAULT_SHARED,
-                        help="folder holding data/meshes, to build the sets (the third-party meshes; without it they are skipped)")
+    add_field_options(parser)
     parser.add_argument("--halves", default="validation,tuning", help="which halves, in this order")
     parser.add_argument("--styles", default=None, help="comma-separated styles (e.g. cells,'fractal r0.01')")
     parser.add_argument("--kinds", default=None, help="comma-separated mesh kinds")

@@ -88,13 +88,12 @@ def figures(rows: list[dict], methods: list[str]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from data_synth.make_sets import DEFAULT_SHARED, build_specs
+    from data_synth.make_sets import add_field_options, build_specs
     from data_synth.sets import FIELD_MESHES, SETS
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks.accuracy.field_segmentation", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sets", type=Path, default=REPO / "puzzles", help="folder of the field sets (built if missing)")
-    parser.add_argument("--shared", type=Path, default=DEFAULT_SHARED, help="folder holding data/meshes, to build the sets")
+    add_field_options(parser)
     parser.add_argument("--halves", default="validation,tuning")
     parser.add_argument("--methods", default="mixture,learned", help="segment.method values to compare")
     parser.add_argument("--max-pieces", type=int, default=4)

@@ -89,8 +89,13 @@ def _baseline(gt_path: Path, seed: int) -> dict:
     return {"part_acc_strict": s["part_acc_strict"], "solved": bool(s["solved"]), "time": elapsed}
 
 
-def run_puzzle(gt_path: str, seed: int, baseline: bool) -> dict:
+def run_puzzle(gt_path: str, seed: int, baseline: bool, settings: tuple[str, ...] = ()) -> dict:
+    from reassemble.config import Config, with_setting
     from reassemble.pipeline import evaluate_files, read_puzzle, run_to_folder
+
+    config = Config()
+    for setting in settings:  # as `reassemble run --set`
+        config = with_setting(config, setting)
 
     gt_path = Path(gt_path)
     puzzle = read_puzzle(gt_path)
@@ -98,7 +103,8 @@ def run_puzzle(gt_path: str, seed: int, baseline: bool) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         wall, cpu = time.perf_counter(), time.process_time()
         try:
-            report = run_to_folder([gt_path.parent / "fragments"], Path(tmp) / "out", seed=seed, jobs=1)
+            report = run_to_folder([gt_path.parent / "fragments"], Path(tmp) / "out", config=config, seed=seed,
+                                   jobs=1)
         except Exception as exc:  # a failure is a figure too: the puzzle counts as unsolved
             out.update(error=f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}",
                        fragments=len(puzzle.meshes), time=time.perf_counter() - wall,
@@ -240,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline-max-pieces", type=int, default=8)
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once (each run uses one process)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.NAME=VALUE",
+                        help="a configuration value for every run, as `reassemble run --set` (repeatable)")
     parser.add_argument("--json", "--out", dest="out", type=Path, default=REPO / "benchmarks" / "results" / "accuracy.field.json",
                         help="the record (default benchmarks/results/accuracy.field.json)")
     parser.add_argument("--resume", action="store_true", help="keep the puzzles already in --out")
@@ -302,11 +310,11 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.jobs, max_tasks_per_child=1) as pool:
         futures = [(half, spec, pool.submit(run_puzzle, str(gt), args.seed,
-                                            args.baseline and spec.pieces <= args.baseline_max_pieces))
+                                            args.baseline and spec.pieces <= args.baseline_max_pieces, tuple(args.set)))
                    for half, spec, gt in todo]
         for half, spec, fut in futures:
             r = fut.result()
-            r.update(half=half, commit=commit, mesh=spec.mesh, kind=FIELD_MESHES[spec.mesh].kind, style=style_label(spec),
+            r.update(half=half, commit=commit, settings=list(args.set), mesh=spec.mesh, kind=FIELD_MESHES[spec.mesh].kind, style=style_label(spec),
                      pieces=spec.pieces, noise=spec.noise)
             rows.append(r)
             base = f"  {r['baseline']['part_acc_strict']:>11.3f}" if "baseline" in r else ""

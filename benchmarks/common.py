@@ -205,11 +205,20 @@ def add_signature_radii(parser) -> None:
                         "(Config.features.signature_radii; default Config's)")
 
 
-def match_config(signature_radii: int | None):
-    """Config with the benchmark's --signature-radii, or the default one."""
+def match_config(signature_radii: int | None, settings: tuple[str, ...] = ()):
+    """Config with the benchmark's --signature-radii and --setting values, or the default one."""
     from reassemble.config import Config, with_setting
 
-    return Config() if signature_radii is None else with_setting(Config(), f"features.signature_radii={signature_radii}")
+    config = Config() if signature_radii is None else with_setting(Config(), f"features.signature_radii={signature_radii}")
+    for setting in settings:
+        config = with_setting(config, setting)
+    return config
+
+
+def add_setting_option(parser) -> None:
+    """``--setting SECTION.NAME=VALUE``: a configuration value for every run of the benchmark."""
+    parser.add_argument("--setting", action="append", default=[], metavar="SECTION.NAME=VALUE",
+                        help="a configuration value for every run, as `reassemble run --set` (repeatable)")
 
 
 def described(gt_path, config, *, cache: bool = True):

@@ -26,19 +26,22 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import add_selection, fpfh_baseline, add_signature_radii, match_config, select, start, table
+from benchmarks.common import (
+    add_selection, add_setting_option, add_signature_radii, fpfh_baseline, match_config, select, start, table,
+)
 
 ALIGN = "anchor_largest"
 
 
-def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | None = None) -> dict:
+def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | None = None,
+               settings: tuple[str, ...] = ()) -> dict:
     from reassemble.pipeline import evaluate_files, run_to_folder
 
     gt_path = Path(gt_path)
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
         report = run_to_folder([gt_path.parent / "fragments"], Path(tmp) / "out", seed=seed,
-                               config=match_config(signature_radii))
+                               config=match_config(signature_radii, settings))
         elapsed = time.perf_counter() - t
         score = evaluate_files(Path(tmp) / "out" / "transforms.json", gt_path)
     out = {"name": gt_path.parent.name, "fragments": report["summary"]["fragments"],
@@ -98,6 +101,7 @@ def main() -> int:
     add_selection(parser, pieces="2,4,8,12,20")
     parser.add_argument("--no-baseline", action="store_true")
     add_signature_radii(parser)
+    add_setting_option(parser)
     parser.add_argument("--baseline-max-pieces", type=int, default=12,
                         help="run the baseline on puzzles of at most this many pieces (default 12: it takes "
                         "about 300 s on a 20-piece puzzle)")
@@ -115,7 +119,8 @@ def main() -> int:
     results = []
     with ProcessPoolExecutor(args.jobs) as pool:
         baseline = [not args.no_baseline and s.pieces <= args.baseline_max_pieces for s in specs]
-        for r in pool.map(run_puzzle, paths, baseline, [args.seed] * len(paths), [args.signature_radii] * len(paths)):
+        for r in pool.map(run_puzzle, paths, baseline, [args.seed] * len(paths), [args.signature_radii] * len(paths),
+                           [tuple(args.setting)] * len(paths)):
             results.append(r)
             report_puzzle(r)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import fpfh_baseline, machine_line, start, table
+from benchmarks.common import add_setting_option, fpfh_baseline, machine_line, match_config, start, table
 
 REPO = Path(__file__).resolve().parents[2]
 ALIGN = "anchor_largest"
@@ -90,12 +90,9 @@ def _baseline(gt_path: Path, seed: int) -> dict:
 
 
 def run_puzzle(gt_path: str, seed: int, baseline: bool, settings: tuple[str, ...] = ()) -> dict:
-    from reassemble.config import Config, with_setting
     from reassemble.pipeline import evaluate_files, read_puzzle, run_to_folder
 
-    config = Config()
-    for setting in settings:  # as `reassemble run --set`
-        config = with_setting(config, setting)
+    config = match_config(None, settings)
 
     gt_path = Path(gt_path)
     puzzle = read_puzzle(gt_path)
@@ -246,8 +243,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline-max-pieces", type=int, default=8)
     parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once (each run uses one process)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--set", action="append", default=[], metavar="SECTION.NAME=VALUE",
-                        help="a configuration value for every run, as `reassemble run --set` (repeatable)")
+    add_setting_option(parser)
     parser.add_argument("--json", "--out", dest="out", type=Path, default=REPO / "benchmarks" / "results" / "accuracy.field.json",
                         help="the record (default benchmarks/results/accuracy.field.json)")
     parser.add_argument("--resume", action="store_true", help="keep the puzzles already in --out")
@@ -310,11 +306,11 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.jobs, max_tasks_per_child=1) as pool:
         futures = [(half, spec, pool.submit(run_puzzle, str(gt), args.seed,
-                                            args.baseline and spec.pieces <= args.baseline_max_pieces, tuple(args.set)))
+                                            args.baseline and spec.pieces <= args.baseline_max_pieces, tuple(args.setting)))
                    for half, spec, gt in todo]
         for half, spec, fut in futures:
             r = fut.result()
-            r.update(half=half, commit=commit, settings=list(args.set), mesh=spec.mesh, kind=FIELD_MESHES[spec.mesh].kind, style=style_label(spec),
+            r.update(half=half, commit=commit, settings=list(args.setting), mesh=spec.mesh, kind=FIELD_MESHES[spec.mesh].kind, style=style_label(spec),
                      pieces=spec.pieces, noise=spec.noise)
             rows.append(r)
             base = f"  {r['baseline']['part_acc_strict']:>11.3f}" if "baseline" in r else ""

@@ -152,8 +152,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=segmenter.MODEL_PATH)
     parser.add_argument("--extra", action="store_true", help="also the extra detailed-organic puzzles "
                         "(training_specs)")
-    parser.add_argument("--folds", type=int, default=4, help="mesh folds of the cross-validation that chooses "
-                        "the log-odds offset (choose_bias; 0: none)")
+    parser.add_argument("--folds", type=int, default=0, help="mesh folds of a cross-validation that chooses "
+                        "a log-odds offset (choose_bias; default 0: none, as the shipped model)")
+    parser.add_argument("--drop", default="", help="comma-separated feature names left out of the model "
+                        "(a study of which evidence generalizes; default: none)")
     parser.add_argument("--no-build", action="store_true", help="skip the puzzles not built yet (the generator "
                         "cannot make some: trying again takes minutes)")
     args = parser.parse_args(argv)
@@ -178,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = np.concatenate([d["rows"] for d in data])
     label = np.concatenate([d["label"] for d in data])
     weight = np.concatenate([d["weight"] for d in data])
+    keep = np.array([n not in set(filter(None, args.drop.split(","))) for n in segmenter.FEATURE_NAMES])
+    full_rows, rows = rows, rows[:, keep]
     puzzle = np.concatenate([np.full(len(d["label"]), k) for k, d in enumerate(data)])
     group = np.concatenate([np.full(len(d["label"]), s.mesh) for s, d in zip(kept, data)])
     bias, cv = (0.0, {}) if args.folds < 2 else choose_bias(rows, label, weight, puzzle, group, folds=args.folds)
@@ -188,9 +192,12 @@ def main(argv: list[str] | None = None) -> int:
     meta = {"format": segmenter.MODEL_FORMAT, "features": list(segmenter.FEATURE_NAMES), "command": command,
             "commit": _commit(), "trained_on": names, "params": PARAMS,
             "sklearn": __import__("sklearn").__version__, "patches": int(len(label)), "bias": bias,
+            "dropped": [n for n, k in zip(segmenter.FEATURE_NAMES, keep) if not k],
             "cross_validation": cv}
     ensemble = segmenter.from_sklearn(model, meta)
-    check = np.abs(ensemble.probability(rows) - model.predict_proba(rows)[:, 1]).max()
+    # the trees index the kept columns; the shipped model takes every feature
+    ensemble = dataclasses.replace(ensemble, feature=np.flatnonzero(keep)[ensemble.feature].astype(np.int32))
+    check = np.abs(ensemble.probability(full_rows) - model.predict_proba(rows)[:, 1]).max()
     if check > 1e-9:
         raise SystemExit(f"train_segmenter: the exported trees differ from scikit-learn's by {check:.3g}")
     ensemble = dataclasses.replace(ensemble, init=ensemble.init + bias)

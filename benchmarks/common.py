@@ -184,19 +184,22 @@ def add_selection(parser, *, pieces: str) -> None:
 
 
 def select(args) -> list:
-    """The puzzles of ``args.set`` the options select (the set is built in ``args.root`` first if missing)."""
-    from data_synth.make_sets import build_set
+    """The puzzles of ``args.set`` the options select; those not built yet are built in
+    ``args.root`` first (only the selected ones: a whole set takes an hour)."""
+    from data_synth.make_sets import build_specs
     from data_synth.sets import SETS
 
-    if not (args.root / "index.json").is_file():
-        print(f"building the {args.set} set in {args.root} ...", flush=True)
-        build_set(args.set, args.root, jobs=max(1, args.jobs))
     pieces = {int(p) for p in args.pieces.split(",")}
     seeds = {int(s) for s in args.seeds.split(",")}
     meshes = set(args.meshes.split(",")) if args.meshes else None
-    return [s for s in SETS[args.set]() if s.pieces in pieces and s.seed in seeds
-            and (meshes is None or s.mesh in meshes) and not (args.clean_only and s.noise)
-            and not (args.noisy_only and not s.noise)]
+    specs = [s for s in SETS[args.set]() if s.pieces in pieces and s.seed in seeds
+             and (meshes is None or s.mesh in meshes) and not (args.clean_only and s.noise)
+             and not (args.noisy_only and not s.noise)]
+    missing = [s for s in specs if not (args.root / s.name / "ground_truth.json").is_file()]
+    if missing:
+        print(f"building {len(missing)} puzzles of the {args.set} set in {args.root} ...", flush=True)
+        build_specs(missing, args.root, set_name=args.set, jobs=max(1, args.jobs))
+    return specs
 
 
 def add_signature_radii(parser) -> None:

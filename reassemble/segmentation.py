@@ -321,41 +321,64 @@ def patch_evidence(meshes, descriptors, *, size: float, params: SegmentParams, s
     mixture : list of (patches,) the mixture's probability of fracture per patch
     rows : with ``learned``, list of (patches, k) features (:data:`segmenter.FEATURE_NAMES`), else None
     """
-    from sklearn.mixture import GaussianMixture
-
     from . import segmenter
 
     rng = np.random.default_rng(seed)
-    frags = []
-    for (given, faces), d in zip(meshes, descriptors):
-        given, faces = np.asarray(given, float), np.asarray(faces, np.int64)
-        vertices = taubin_smooth(given, faces, smoothing) if smoothing else given
-        patch, pairs, dihedral = make_patches(vertices, faces, size=size, params=params)
-        n_patches = int(patch.max()) + 1
-        area = face_areas(given, faces)
-        patch_area = np.bincount(patch, area, n_patches)
-        samples, face_of_sample = sample_surface(vertices, faces, params.samples, rng=rng)
-        residual, plane = fit_residuals(samples, patch[face_of_sample], n_patches, min_samples=params.min_samples)
-        relative = residual / np.sqrt(np.maximum(patch_area, 1e-300))
-        # an exact quadric (a CAD face, a cylinder): original surface, and no evidence for
-        # the mixture, whose two components would otherwise split flat from curved
-        log_residual = np.where(relative < EXACT_QUADRIC, -np.inf, np.log(relative + 1e-4))
-        normal_angle = np.degrees(np.arccos(np.clip(np.abs(
-            np.einsum("ij,ij->i", d.normal[:, 0], face_normals(vertices, faces))), 0.0, 1.0)))
-        k2 = np.maximum(d.K2_cov[:, 0], 0.0) * d.radii[0] ** 2
-        face_features = np.column_stack([np.log(normal_angle + 1e-2), np.log(k2 + 1e-5)])
-        edge_vertices = face_adjacency(faces)[1]
-        edge_length = np.linalg.norm(vertices[edge_vertices[:, 0]] - vertices[edge_vertices[:, 1]], axis=1)
-        features = None
-        if learned:
-            relative_plane = plane / np.sqrt(np.maximum(patch_area, 1e-300))
-            features = segmenter.fragment_features(
-                vertices, faces, d, patch=patch, pairs=pairs, dihedral=dihedral, edge_length=edge_length,
-                face_area=area, patch_area=patch_area, crease_angle=params.crease_angle,
-                log_quadric=log_residual,
-                log_plane=np.where(relative_plane < EXACT_QUADRIC, -np.inf, np.log(relative_plane + 1e-4)))
-        frags.append(_Fragment(patch, pairs, dihedral, edge_length, area, patch_area, log_residual, face_features,
-                               features))
+    frags = [_fragment_patches(given, faces, d, size=size, params=params, smoothing=smoothing, learned=learned,
+                               rng=rng) for (given, faces), d in zip(meshes, descriptors)]
+    mixture, scores = _mixture(frags, params=params, rng=rng)
+    if not learned:
+        return frags, mixture, None
+    neighbours = []
+    for f in frags:
+        pu, pv = f.patch[f.pairs[:, 0]], f.patch[f.pairs[:, 1]]
+        cross = pu != pv
+        neighbours.append((np.r_[pu[cross], pv[cross]], np.r_[pv[cross], pu[cross]],
+                           np.r_[f.edge_length[cross], f.edge_length[cross]]))
+    rows = segmenter.set_features([f.features for f in frags], [f.patch_area for f in frags], neighbours,
+                                  mixture, scores)
+    return frags, mixture, rows
+
+
+def _fragment_patches(given, faces, d, *, size: float, params: SegmentParams, smoothing: int, learned: bool,
+                      rng: np.random.Generator) -> _Fragment:
+    """One fragment's patches, quadric fits and face roughness (and the learned method's
+    features); with ``smoothing``, geometry from a Taubin-smoothed copy, areas from ``given``."""
+    from . import segmenter
+
+    given, faces = np.asarray(given, float), np.asarray(faces, np.int64)
+    vertices = taubin_smooth(given, faces, smoothing) if smoothing else given
+    patch, pairs, dihedral = make_patches(vertices, faces, size=size, params=params)
+    n_patches = int(patch.max()) + 1
+    area = face_areas(given, faces)
+    patch_area = np.bincount(patch, area, n_patches)
+    samples, face_of_sample = sample_surface(vertices, faces, params.samples, rng=rng)
+    residual, plane = fit_residuals(samples, patch[face_of_sample], n_patches, min_samples=params.min_samples)
+    relative = residual / np.sqrt(np.maximum(patch_area, 1e-300))
+    # an exact quadric (a CAD face, a cylinder): original surface, and no evidence for
+    # the mixture, whose two components would otherwise split flat from curved
+    log_residual = np.where(relative < EXACT_QUADRIC, -np.inf, np.log(relative + 1e-4))
+    normal_angle = np.degrees(np.arccos(np.clip(np.abs(
+        np.einsum("ij,ij->i", d.normal[:, 0], face_normals(vertices, faces))), 0.0, 1.0)))
+    k2 = np.maximum(d.K2_cov[:, 0], 0.0) * d.radii[0] ** 2
+    face_features = np.column_stack([np.log(normal_angle + 1e-2), np.log(k2 + 1e-5)])
+    edge_vertices = face_adjacency(faces)[1]
+    edge_length = np.linalg.norm(vertices[edge_vertices[:, 0]] - vertices[edge_vertices[:, 1]], axis=1)
+    features = None
+    if learned:
+        relative_plane = plane / np.sqrt(np.maximum(patch_area, 1e-300))
+        features = segmenter.fragment_features(
+            vertices, faces, d, patch=patch, pairs=pairs, dihedral=dihedral, edge_length=edge_length,
+            face_area=area, patch_area=patch_area, crease_angle=params.crease_angle,
+            log_quadric=log_residual,
+            log_plane=np.where(relative_plane < EXACT_QUADRIC, -np.inf, np.log(relative_plane + 1e-4)))
+    return _Fragment(patch, pairs, dihedral, edge_length, area, patch_area, log_residual, face_features, features)
+
+
+def _mixture(frags: list[_Fragment], *, params: SegmentParams, rng: np.random.Generator):
+    """The mixture's evidence: per fragment (patches,) probability of fracture, and
+    (patches,) roughness score (standardized over the set)."""
+    from sklearn.mixture import GaussianMixture
 
     weights = np.concatenate([f.patch_area for f in frags])
     features = np.concatenate([f.face_features for f in frags])
@@ -395,7 +418,6 @@ def patch_evidence(meshes, descriptors, *, size: float, params: SegmentParams, s
         other = fracture_components(fits[1])
         if other[1] >= params.min_fracture_share:
             gmm, (rough, share) = fits[1], other
-
     mixture = []
     for f, score, ex in zip(frags, scores, exact):
         prob = np.zeros(len(score))
@@ -407,17 +429,7 @@ def patch_evidence(meshes, descriptors, *, size: float, params: SegmentParams, s
         if not small.all():
             prob[small] = 0.5
         mixture.append(prob)
-    if not learned:
-        return frags, mixture, None
-    neighbours = []
-    for f in frags:
-        pu, pv = f.patch[f.pairs[:, 0]], f.patch[f.pairs[:, 1]]
-        cross = pu != pv
-        neighbours.append((np.r_[pu[cross], pv[cross]], np.r_[pv[cross], pu[cross]],
-                           np.r_[f.edge_length[cross], f.edge_length[cross]]))
-    rows = segmenter.set_features([f.features for f in frags], [f.patch_area for f in frags], neighbours,
-                                  mixture, scores)
-    return frags, mixture, rows
+    return mixture, scores
 
 
 def _tidy(f: _Fragment, prob: np.ndarray, params: SegmentParams) -> np.ndarray:

@@ -33,16 +33,16 @@ PARAMS = dict(max_iter=200, max_leaf_nodes=15, learning_rate=0.1, min_samples_le
 
 def training_specs(half: str = "tuning", *, max_pieces: int = 4, extra: bool = False) -> list:
     """The puzzles of one field half the classifier learns from (or is scored on): up to
-    ``max_pieces`` pieces, no sherds. ``extra``: also every style on the half's detailed
-    organic meshes with another seed and count (the kind whose own detail is rougher than
-    a break: three meshes in the half, one of which the generator cannot break)."""
+    ``max_pieces`` pieces, no sherds. ``extra``: also every style on every mesh of the half
+    with another seed and 5-8 pieces, clean (more breaks per mesh, and a larger share of
+    the surface: fragments of larger sets have more break faces, meeting at edges and corners)."""
     from .sets import FIELD_MESHES, FIELD_STYLES, PuzzleSpec, field_set
 
     specs = [s for s in field_set(half) if s.pieces <= max_pieces and FIELD_MESHES[s.mesh].kind != "sherds"]
     if extra:
-        meshes = [n for n, m in FIELD_MESHES.items() if m.half == half and m.kind == "detailed organic"]
-        specs += [PuzzleSpec(mesh, 2 + (i + j + 1) % 3, 3, noise=noise, style=style)
-                  for i, mesh in enumerate(meshes) for j, style in enumerate(FIELD_STYLES) for noise in (0.0, 0.001)]
+        meshes = [n for n, m in FIELD_MESHES.items() if m.half == half and m.kind != "sherds"]
+        specs += [PuzzleSpec(mesh, 5 + (i + j) % 4, 3, style=style)
+                  for i, mesh in enumerate(meshes) for j, style in enumerate(FIELD_STYLES)]
     return specs
 
 
@@ -150,8 +150,9 @@ def main(argv: list[str] | None = None) -> int:
     add_field_options(parser, sets="SETS/field-tuning")
     parser.add_argument("--max-pieces", type=int, default=4)
     parser.add_argument("--out", type=Path, default=segmenter.MODEL_PATH)
-    parser.add_argument("--extra", action="store_true", help="also the extra detailed-organic puzzles "
-                        "(training_specs)")
+    parser.add_argument("--extra", action="store_true", help="also 5-8 piece puzzles of every style and "
+                        "mesh of the tuning half (training_specs): a second model is fitted on all the "
+                        "puzzles and the two models' log-odds averaged (the shipped model)")
     parser.add_argument("--folds", type=int, default=0, help="mesh folds of a cross-validation that chooses "
                         "a log-odds offset (choose_bias; default 0: none, as the shipped model)")
     parser.add_argument("--drop", default="", help="comma-separated feature names left out of the model "
@@ -183,21 +184,27 @@ def main(argv: list[str] | None = None) -> int:
     keep = np.array([n not in set(filter(None, args.drop.split(","))) for n in segmenter.FEATURE_NAMES])
     full_rows, rows = rows, rows[:, keep]
     puzzle = np.concatenate([np.full(len(d["label"]), k) for k, d in enumerate(data)])
+    base = {s.name for s in training_specs("tuning", max_pieces=args.max_pieces)}
+    extra_of = np.concatenate([np.full(len(d["label"]), s.name not in base, float) for s, d in zip(kept, data)])
     group = np.concatenate([np.full(len(d["label"]), s.mesh) for s, d in zip(kept, data)])
     bias, cv = (0.0, {}) if args.folds < 2 else choose_bias(rows, label, weight, puzzle, group, folds=args.folds)
     if cv:
         print(f"log-odds offset {bias:+.1f}: out-of-fold mean puzzle F1 {cv['f1_no_bias']:.3f} -> {cv['f1']:.3f} "
               f"({args.folds} mesh folds)", flush=True)
-    model = fit(rows, label, weight)
+    # with --extra, two models (the base puzzles; all of them) whose log-odds are averaged
+    parts = [np.ones(len(label), bool)] if not args.extra else [extra_of < 0.5, np.ones(len(label), bool)]
+    models = [fit(rows[p], label[p], weight[p]) for p in parts]
     meta = {"format": segmenter.MODEL_FORMAT, "features": list(segmenter.FEATURE_NAMES), "command": command,
             "commit": _commit(), "trained_on": names, "params": PARAMS,
             "sklearn": __import__("sklearn").__version__, "patches": int(len(label)), "bias": bias,
             "dropped": [n for n, k in zip(segmenter.FEATURE_NAMES, keep) if not k],
-            "cross_validation": cv}
-    ensemble = segmenter.from_sklearn(model, meta)
+            "averaged": [int(p.sum()) for p in parts], "cross_validation": cv}
     # the trees index the kept columns; the shipped model takes every feature
-    ensemble = dataclasses.replace(ensemble, feature=np.flatnonzero(keep)[ensemble.feature].astype(np.int32))
-    check = np.abs(ensemble.probability(full_rows) - model.predict_proba(rows)[:, 1]).max()
+    exported = [segmenter.from_sklearn(m, meta) for m in models]
+    exported = [dataclasses.replace(e, feature=np.flatnonzero(keep)[e.feature].astype(np.int32)) for e in exported]
+    ensemble = exported[0] if len(exported) == 1 else segmenter.average(exported, meta)
+    want = np.mean([m.decision_function(rows) for m in models], axis=0)
+    check = np.abs(ensemble.decision(full_rows) - want).max()
     if check > 1e-9:
         raise SystemExit(f"train_segmenter: the exported trees differ from scikit-learn's by {check:.3g}")
     ensemble = dataclasses.replace(ensemble, init=ensemble.init + bias)

@@ -206,6 +206,26 @@ def from_sklearn(model, meta: dict) -> TreeEnsemble:
                         float(np.ravel(model._baseline_prediction)[0]), meta)
 
 
+def average(models: list[TreeEnsemble], meta: dict) -> TreeEnsemble:
+    """One ensemble whose decision is the mean of the ``models``' decisions (log-odds).
+
+    Notes
+    -----
+    Averaging models fitted on different training sets (bagging) keeps what each learned
+    where the other has little data: trained on more pieces per object, a model labels the
+    larger breaks of many-piece sets better and detailed originals worse
+    (``docs/method/segmentation.md``).
+    """
+    k = len(models)
+    offsets = np.cumsum([0] + [len(m.feature) for m in models[:-1]])
+    return TreeEnsemble(
+        np.concatenate([m.feature for m in models]), np.concatenate([m.threshold for m in models]),
+        np.concatenate([np.where(m.left >= 0, m.left + o, -1) for m, o in zip(models, offsets)]).astype(np.int32),
+        np.concatenate([np.where(m.right >= 0, m.right + o, -1) for m, o in zip(models, offsets)]).astype(np.int32),
+        np.concatenate([m.value / k for m in models]), np.concatenate([m.roots + o for m, o in zip(models, offsets)]).astype(np.int32),
+        float(sum(m.init for m in models) / k), meta)
+
+
 def save(model: TreeEnsemble, path: Path = MODEL_PATH) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "wb") as fh:

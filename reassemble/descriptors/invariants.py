@@ -283,12 +283,7 @@ def _distance_integrals(
 
     Parameters
     ----------
-    scene : ray-casting scene of the mesh
-    vertices : (v, 3) float64, faces : (f, 3) int64
-    radii : (m,) kernel radii
-    points : (n, 3) query points
-    params : DescriptorParams
-    timings : seconds per stage, added to in place
+    scene, vertices, faces, radii, points, params, timings : as in :func:`_volume_integrals`
 
     Returns
     -------

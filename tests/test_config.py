@@ -97,6 +97,7 @@ def test_cli_unknown_setting_is_a_one_line_error(tmp_path, capsys):
     assert err.count("\n") == 1 and not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_config_json_reproduces_the_run(run_dir, puzzle_dir, tmp_path, capsys):
     written = json.loads((run_dir / "config.json").read_text())
     config = read_config(run_dir / "config.json")

@@ -43,6 +43,7 @@ def puzzles(tmp_path_factory):
 
 COW = ("spot_low_resolution", 4, 1)  # the suite's puzzle (a smoke-set case too)
 SMALL_COW = ("spot_low_resolution", 2, 0)  # the smallest smoke-set case: two fragments
+TORUS3 = ("torus", 3, 0)  # a smoke-set case: three fragments, three pairs
 
 
 @pytest.fixture(scope="session")

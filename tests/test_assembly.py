@@ -16,8 +16,6 @@ from reassemble.synth import BreakParams
 
 from .conftest import COW, SMALL_COW, tree_digest
 
-TORUS3 = ("torus", 3, 0)  # a smoke-set case: its run is shared
-
 
 def _score(run_dir, puzzle_dir) -> dict:
     report = evaluate_files(run_dir / "transforms.json", puzzle_dir / "ground_truth.json")
@@ -69,16 +67,16 @@ def test_run_recovers_a_moved_fragment(puzzles, tmp_path, rng):
     """Moving one input file by a known rigid motion moves its result by exactly the inverse."""
     import trimesh
 
-    puzzle_dir, run_dir = puzzles.puzzle(*TORUS3), puzzles.run(*TORUS3)
+    puzzle_dir, run_dir = puzzles.puzzle(*SMALL_COW), puzzles.run(*SMALL_COW)  # a smoke-set case: shared
     frags = tmp_path / "fragments"
     shutil.copytree(puzzle_dir / "fragments", frags)
-    name = sorted(p.stem for p in frags.iterdir())[1]
+    before = read_transforms(run_dir / "transforms.json")
+    name = next(n for n, t in sorted(before.items()) if not np.allclose(t["transform"], np.eye(4)))  # not the anchor
     M = make_transform(random_rotation(rng), rng.normal(size=3))
     mesh = trimesh.load(frags / f"{name}.ply", process=False)
     mesh.apply_transform(M)
     mesh.export(frags / f"{name}.ply")
     run_to_folder([frags], tmp_path / "out", seed=0)
-    before = read_transforms(run_dir / "transforms.json")
     after = read_transforms(tmp_path / "out" / "transforms.json")
     anchor = next(n for n, t in before.items() if np.allclose(t["transform"], np.eye(4)))
     assert anchor != name
@@ -205,7 +203,7 @@ def test_units_do_not_matter(puzzles, tmp_path):
     """The same fragments in millimetres instead of metres: the same result, up to scale."""
     import trimesh
 
-    puzzle_dir, run_dir = puzzles.puzzle(*TORUS3), puzzles.run(*TORUS3)
+    puzzle_dir, run_dir = puzzles.puzzle(*SMALL_COW), puzzles.run(*SMALL_COW)  # a smoke-set case: shared
     scaled = tmp_path / "mm"
     scaled.mkdir()
     for p in sorted((puzzle_dir / "fragments").iterdir()):

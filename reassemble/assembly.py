@@ -359,6 +359,51 @@ def _union(meshes: list[tuple[np.ndarray, np.ndarray]], T_group_fragment: np.nda
     return np.vstack(vertices), np.vstack(faces)
 
 
+def _normal_equations(pairs: list[tuple[int, int]], pts: list[np.ndarray], nrm: list[np.ndarray], trees: dict,
+                      col: dict[int, int], *, distance: float, cos_tol: float, gap: float):
+    """The point-to-plane normal equations of one step of :func:`refine`.
+
+    Parameters
+    ----------
+    pairs : (p, q) fragment pairs: p's samples against q's surface
+    pts, nrm : per fragment, (s, 3) samples and their unit normals in the common frame
+    trees : cKDTree of each target q's samples moved out by ``gap`` along their normals
+    col : first column of each free fragment's 6 unknowns (rotation vector, translation)
+    distance : matches further apart are ignored
+    cos_tol : matched normals must be opposed within this cosine
+    gap : separation kept between mating surfaces
+
+    Returns
+    -------
+    AtA (6 f, 6 f), Atb (6 f,), the number of matched samples, the pairs that matched any
+    """
+    n = 6 * len(col)
+    AtA = np.zeros((n, n))
+    Atb = np.zeros(n)
+    rows = 0
+    touching = []
+    for p, q in pairs:
+        d, j = trees[q].query(pts[p], distance_upper_bound=distance)
+        ok = np.isfinite(d)
+        ok[ok] = np.einsum("ij,ij->i", nrm[p][ok], nrm[q][j[ok]]) < -cos_tol
+        if not ok.any():
+            continue
+        touching.append((p, q))
+        P, Q, N = pts[p][ok], pts[q][j[ok]] + gap * nrm[q][j[ok]], nrm[q][j[ok]]
+        r = np.einsum("ij,ij->i", P - Q, N)
+        blocks = []
+        if p in col:
+            blocks.append((col[p], np.hstack([np.cross(P, N), N])))
+        if q in col:
+            blocks.append((col[q], -np.hstack([np.cross(Q, N), N])))
+        for ca, Ja in blocks:
+            Atb[ca:ca + 6] -= Ja.T @ r
+            for cb, Jb in blocks:
+                AtA[ca:ca + 6, cb:cb + 6] += Ja.T @ Jb
+        rows += len(r)
+    return AtA, Atb, rows, touching
+
+
 def refine(
     T_group_fragment: np.ndarray,
     surfaces: list[FractureSurface],
@@ -406,29 +451,8 @@ def refine(
             nrm = [s.sample_normals[:n_points] @ T[k][:3, :3].T for k, s in enumerate(surfaces)]
             # each source sample is matched to the target's surface moved out by the gap
             trees = {q: cKDTree(pts[q] + gap * nrm[q]) for q in {q for _, q in pairs}}
-            AtA = np.zeros((6 * len(free), 6 * len(free)))
-            Atb = np.zeros(6 * len(free))
-            rows = 0
-            touching = []
-            for p, q in pairs:
-                d, j = trees[q].query(pts[p], distance_upper_bound=distance)
-                ok = np.isfinite(d)
-                ok[ok] = np.einsum("ij,ij->i", nrm[p][ok], nrm[q][j[ok]]) < -cos_tol
-                if not ok.any():
-                    continue
-                touching.append((p, q))
-                P, Q, N = pts[p][ok], pts[q][j[ok]] + gap * nrm[q][j[ok]], nrm[q][j[ok]]
-                r = np.einsum("ij,ij->i", P - Q, N)
-                blocks = []
-                if p in col:
-                    blocks.append((col[p], np.hstack([np.cross(P, N), N])))
-                if q in col:
-                    blocks.append((col[q], -np.hstack([np.cross(Q, N), N])))
-                for ca, Ja in blocks:
-                    Atb[ca:ca + 6] -= Ja.T @ r
-                    for cb, Jb in blocks:
-                        AtA[ca:ca + 6, cb:cb + 6] += Ja.T @ Jb
-                rows += len(r)
+            AtA, Atb, rows, touching = _normal_equations(pairs, pts, nrm, trees, col, distance=distance,
+                                                         cos_tol=cos_tol, gap=gap)
             if rows < 6:
                 return T
             scale = max(np.trace(AtA) / max(len(AtA), 1), 1e-300)

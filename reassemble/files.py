@@ -106,6 +106,40 @@ def load_mesh(
     import trimesh
 
     path = Path(path)
+    vertices, faces = _read_triangles(path)
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=weld, validate=False)
+    if weld:
+        f = mesh.faces
+        collapsed = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+        mesh.update_faces(~collapsed)
+        mesh.remove_unreferenced_vertices()
+        if len(mesh.faces) == 0:
+            raise ReassembleError(f"{path}: all triangles are degenerate")
+
+    filled: tuple[float, ...] = ()
+    repairs = ""
+    if require_closed:
+        mesh, filled, repairs = _solid_surface(mesh, path, fill_holes)
+    return MeshData(
+        vertices=np.asarray(mesh.vertices, dtype=np.float64).copy(),
+        faces=np.asarray(mesh.faces, dtype=np.int64).copy(),
+        path=path,
+        filled_holes=filled,
+        repairs=repairs,
+    )
+
+
+def _read_triangles(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices (n, 3) float64 and triangles (m, 3) int64 of a mesh file, as stored.
+
+    Raises
+    ------
+    ReassembleError
+        One line naming the file and the problem (missing, empty, unreadable, no valid
+        triangles).
+    """
+    import trimesh
+
     if not path.is_file():
         raise ReassembleError(f"{path}: no such file")
     if path.suffix.lower() not in MESH_SUFFIXES:
@@ -129,56 +163,59 @@ def load_mesh(
         raise ReassembleError(f"{path}: has NaN or infinite vertex coordinates")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise ReassembleError(f"{path}: faces refer to missing vertices")
+    return vertices, faces
 
-    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=weld, validate=False)
-    if weld:
-        f = mesh.faces
-        collapsed = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
-        mesh.update_faces(~collapsed)
-        mesh.remove_unreferenced_vertices()
-        if len(mesh.faces) == 0:
-            raise ReassembleError(f"{path}: all triangles are degenerate")
+
+def _solid_surface(mesh, path: Path, fill_holes: float | None):
+    """The surface of the solid of a welded mesh (:func:`load_mesh`'s ``require_closed``).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh, welded
+    path : the file it was read from (for messages)
+    fill_holes : as in :func:`load_mesh`
+
+    Returns
+    -------
+    mesh : trimesh.Trimesh, repaired, holes filled, outward
+    filled : the extent of every hole closed, largest first
+    repairs : one line of what was found and done, "" for a clean closed mesh
+    """
+    import trimesh
+
+    from .repair import is_closed_solid, repair_surface
 
     filled: tuple[float, ...] = ()
     repairs = ""
-    if require_closed:
-        from .repair import is_closed_solid, repair_surface
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    repair = repair_surface(np.asarray(mesh.vertices), faces)
+    if len(repair.faces) == 0 or repair.dangling > 2 * len(repair.faces):  # mostly sheets bounding nothing
+        raise ReassembleError(f"{path}: has no inside (an open sheet: its faces bound no solid, "
+                              "nothing is behind them)")
+    if repair.changed:
+        mesh = trimesh.Trimesh(vertices=np.asarray(mesh.vertices), faces=repair.faces, process=False,
+                               validate=False)
+        mesh.remove_unreferenced_vertices()
+    if fill_holes is not None:
+        from .holes import fill_holes as close
 
-        faces = np.asarray(mesh.faces, dtype=np.int64)
-        repair = repair_surface(np.asarray(mesh.vertices), faces)
-        if len(repair.faces) == 0 or repair.dangling > 2 * len(repair.faces):  # mostly sheets bounding nothing
-            raise ReassembleError(f"{path}: has no inside (an open sheet: its faces bound no solid, "
-                                  "nothing is behind them)")
-        if repair.changed:
-            mesh = trimesh.Trimesh(vertices=np.asarray(mesh.vertices), faces=repair.faces, process=False,
-                                   validate=False)
-            mesh.remove_unreferenced_vertices()
-        if fill_holes is not None:
-            from .holes import fill_holes as close
-
-            vertices, faces, sizes = close(np.asarray(mesh.vertices), np.asarray(mesh.faces), max_size=fill_holes)
-            if sizes and sizes[0] > fill_holes:
-                raise ReassembleError(
-                    f"{path}: has a hole spanning {sizes[0]:.0%} of its size, more than --fill-holes "
-                    f"{fill_holes:g} closes (raise it, or leave --fill-holes out: open meshes are read as they are)"
-                )
-            filled = tuple(sizes)
-            mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
-            if filled:
-                repair = dataclasses.replace(repair, holes=0)
-        if is_closed_solid(mesh.faces) and mesh.volume < 0:
-            mesh.invert()
-        inverted_only = repair.reoriented == len(faces) and not (
-            repair.duplicates or repair.paired or repair.interior or repair.dangling)
-        if not (inverted_only or not repair.changed and is_closed_solid(faces)):
-            repairs = repair.summary()  # (a clean solid turned inside out is only turned back)
-    return MeshData(
-        vertices=np.asarray(mesh.vertices, dtype=np.float64).copy(),
-        faces=np.asarray(mesh.faces, dtype=np.int64).copy(),
-        path=path,
-        filled_holes=filled,
-        repairs=repairs,
-    )
+        vertices, faces, sizes = close(np.asarray(mesh.vertices), np.asarray(mesh.faces), max_size=fill_holes)
+        if sizes and sizes[0] > fill_holes:
+            raise ReassembleError(
+                f"{path}: has a hole spanning {sizes[0]:.0%} of its size, more than --fill-holes "
+                f"{fill_holes:g} closes (raise it, or leave --fill-holes out: open meshes are read as they are)"
+            )
+        filled = tuple(sizes)
+        mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
+        if filled:
+            repair = dataclasses.replace(repair, holes=0)
+    if is_closed_solid(mesh.faces) and mesh.volume < 0:
+        mesh.invert()
+    inverted_only = repair.reoriented == len(faces) and not (
+        repair.duplicates or repair.paired or repair.interior or repair.dangling)
+    if not (inverted_only or not repair.changed and is_closed_solid(faces)):
+        repairs = repair.summary()  # (a clean solid turned inside out is only turned back)
+    return mesh, filled, repairs
 
 
 def load_solid(path: str | os.PathLike, *, fill_holes: float | None = None) -> MeshData:

@@ -410,6 +410,74 @@ def _specks(faces: np.ndarray, remove: np.ndarray, area: np.ndarray) -> np.ndarr
     return out
 
 
+def _turn_inverted_patches(vertices: np.ndarray, f: np.ndarray, patch: np.ndarray, area: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Turn over the consistently oriented patches that face inward as a whole, and read
+    the winding number either side of every face (:func:`_sides`).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    f : (f, 3) int64, oriented consistently within each patch
+    patch : (f,) int, the patch of each face
+    area : (f,) face areas
+
+    Returns
+    -------
+    f (f, 3), and front, back (f,) float and sure (f,) bool of :func:`_sides` on it
+    """
+    front, back, sure = _sides(vertices, f)
+    n_patch = int(patch.max()) + 1
+    mean = 0.5 * (front + back)
+    # area-weighted mean of the unclipped reading per patch: about -1/2 means turned inside out
+    inverted = np.bincount(patch, mean * area, n_patch) < -0.25 * np.bincount(patch, area, n_patch)
+    if inverted.any():
+        f = np.where(inverted[patch][:, None], f[:, ::-1], f)
+        front, back, sure = _sides(vertices, f)
+    return f, front, back, sure
+
+
+def _drop_sheets(vertices: np.ndarray, f: np.ndarray, patch: np.ndarray, front: np.ndarray, back: np.ndarray,
+                 sure: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mark the faces bounding nothing (``DANGLING``), sheets first, reading the others
+    again without them after each round.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64, f : (f, 3) int64, patch : (f,) int
+    front, back : (f,) float, sure : (f,) bool: :func:`_sides` of every face, updated in
+        place where read again
+
+    Returns
+    -------
+    m : (f,) the mean of the clipped readings either side, dangling : (f,) bool
+    """
+    n_patch = int(patch.max()) + 1
+    m = 0.5 * (np.clip(front, 0.0, 1.0) + np.clip(back, 0.0, 1.0))
+    dangling = np.zeros(len(f), bool)
+    # patches with boundary edges: sheets, whose faces go first
+    directed = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, inv, counts = np.unique(directed, axis=0, return_inverse=True, return_counts=True)
+    sheet = np.bincount(np.repeat(patch, 3), counts[inv.ravel()] == 1, n_patch)[patch] > 0
+    for k in range(4):
+        # a sheet bounding nothing spoils the count of every ray through it: drop the
+        # sheets the rays are sure of and read the rest again
+        new = (m < DANGLING) & sure & ~dangling & (sheet if k == 0 else True)
+        if not new.any() or new.sum() == np.sum(~dangling):
+            if k == 0:
+                continue
+            break
+        dangling |= new
+        # read again those a sheet may have spoiled: not surely on the surface
+        again = np.flatnonzero(~dangling & ((m != 0.5) | ~sure))
+        if len(again):
+            rest = np.flatnonzero(~dangling)
+            fr, bk, su = _sides(vertices, f[rest], only=np.searchsorted(rest, again))
+            front[again], back[again], sure[again] = fr, bk, su
+            m[again] = 0.5 * (np.clip(fr, 0.0, 1.0) + np.clip(bk, 0.0, 1.0))
+    return m, dangling
+
+
 def repair_surface(vertices: np.ndarray, faces: np.ndarray) -> Repair:
     """The outer surface of a triangle set (welded vertices, no collapsed faces).
 
@@ -456,37 +524,10 @@ def repair_surface(vertices: np.ndarray, faces: np.ndarray) -> Repair:
         same = _same_orientation(f, original)
         return Repair(f, duplicates=duplicates, paired=paired, reoriented=int(np.sum(~same)),
                       non_manifold=edge_counts(f)[2])
-    front, back, sure = _sides(vertices, f)
     area = face_areas(vertices, f)
     n_patch = int(patch.max()) + 1
-    mean = 0.5 * (front + back)
-    # area-weighted mean of the unclipped reading per patch: about -1/2 means turned inside out
-    inverted = np.bincount(patch, mean * area, n_patch) < -0.25 * np.bincount(patch, area, n_patch)
-    if inverted.any():
-        f = np.where(inverted[patch][:, None], f[:, ::-1], f)
-        front, back, sure = _sides(vertices, f)
-    m = 0.5 * (np.clip(front, 0.0, 1.0) + np.clip(back, 0.0, 1.0))
-    dangling = np.zeros(len(f), bool)
-    # patches with boundary edges: sheets, whose faces go first
-    directed = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    _, inv, counts = np.unique(directed, axis=0, return_inverse=True, return_counts=True)
-    sheet = np.bincount(np.repeat(patch, 3), counts[inv.ravel()] == 1, n_patch)[patch] > 0
-    for k in range(4):
-        # a sheet bounding nothing spoils the count of every ray through it: drop the
-        # sheets the rays are sure of and read the rest again
-        new = (m < DANGLING) & sure & ~dangling & (sheet if k == 0 else True)
-        if not new.any() or new.sum() == np.sum(~dangling):
-            if k == 0:
-                continue
-            break
-        dangling |= new
-        # read again those a sheet may have spoiled: not surely on the surface
-        again = np.flatnonzero(~dangling & ((m != 0.5) | ~sure))
-        if len(again):
-            rest = np.flatnonzero(~dangling)
-            fr, bk, su = _sides(vertices, f[rest], only=np.searchsorted(rest, again))
-            front[again], back[again], sure[again] = fr, bk, su
-            m[again] = 0.5 * (np.clip(fr, 0.0, 1.0) + np.clip(bk, 0.0, 1.0))
+    f, front, back, sure = _turn_inverted_patches(vertices, f, patch, area)
+    m, dangling = _drop_sheets(vertices, f, patch, front, back, sure)
     interior = (m > INTERIOR) & ~dangling
     dangling |= m < DANGLING
     # the winding number fades towards a hole's rim, so rim faces can read outside on both

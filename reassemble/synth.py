@@ -720,16 +720,7 @@ def break_mesh(
     cut_rng, chip_rng, pose_rng, noise_rng = rng.spawn(4)
     split = _cells if params.style == "cells" else _fracture
     pieces, cut_ids, cuts = split(solid, params=params, diag=diag, rng=cut_rng)
-    damage_ids = set(cut_ids)
-    if params.chips > 0:
-        chipped = []
-        for piece in pieces:
-            piece, ids = _chip(piece, cut_ids=cut_ids, params=params, diag=diag, rng=chip_rng)
-            damage_ids |= ids
-            chipped.append(piece)
-        pieces = chipped
-    if params.decimate > 0:
-        pieces = [p.simplify(params.decimate * diag) for p in pieces]
+    pieces, damage_ids = _damage(pieces, cut_ids, params=params, diag=diag, rng=chip_rng)
 
     interior_ids: set[int] = set()
     if params.keep_cell_faces:  # last, on the final pieces: their outer surface stays as it is
@@ -743,18 +734,75 @@ def break_mesh(
         meshes = [_mesh_arrays(p) for p in pieces]
 
     names = [f"fragment_{k:02d}" for k in pose_rng.permutation(len(pieces))]
-    world = []
-    for name, (v, f, origin) in zip(names, meshes):
-        labels = np.where(origin == object_id, ORIGINAL, FRACTURE).astype(np.int8)
-        labels[np.isin(origin, list(interior_ids))] = INTERIOR
-        if not np.all(np.isin(origin, list(damage_ids | interior_ids | {object_id}))):
-            raise RuntimeError("manifold3d lost the origin of some triangles")
-        world.append((name, v, f, labels))
+    world = [(name, v, f, _face_labels(origin, object_id, damage_ids, interior_ids))
+             for name, (v, f, origin) in zip(names, meshes)]
     contacts = _contacts(world, tol=max(1e-5, 2.0 * params.decimate) * diag)
     if params.gap > 0:  # after the contacts: they are the true neighbours, gap or not
         world = [(name, _erode(v, f, labels == FRACTURE, 0.5 * params.gap * diag), f, labels)
                  for name, v, f, labels in world]
 
+    fragments = _pose(world, params=params, diag=diag, pose_rng=pose_rng, noise_rng=noise_rng)
+    contacts.sort(key=lambda c: (c.a, c.b))
+    stats = {"cuts": len(cut_ids), "chips": len(damage_ids) - len(cut_ids), "cut_styles": cuts,
+             "interior_cuts": len(interior_ids)}
+    log.info("broke into %d fragments with %d cuts, %d chips", len(fragments), stats["cuts"], stats["chips"])
+    return Puzzle(fragments, contacts, bbox_min, bbox_max, float(volume), float(area), stats)
+
+
+def _face_labels(origin: np.ndarray, object_id: int, damage_ids: set[int], interior_ids: set[int]) -> np.ndarray:
+    """(m,) int8 labels of faces from the manifold3d original id each came from: the input
+    solid's are ``ORIGINAL``, the cells' ``INTERIOR``, the cutters' and chips' ``FRACTURE``."""
+    labels = np.where(origin == object_id, ORIGINAL, FRACTURE).astype(np.int8)
+    labels[np.isin(origin, list(interior_ids))] = INTERIOR
+    if not np.all(np.isin(origin, list(damage_ids | interior_ids | {object_id}))):
+        raise RuntimeError("manifold3d lost the origin of some triangles")
+    return labels
+
+
+def _damage(pieces: list, cut_ids: set[int], *, params: BreakParams, diag: float, rng: np.random.Generator):
+    """Chip the pieces' rims and decimate them, as ``params`` asks.
+
+    Parameters
+    ----------
+    pieces : manifold3d Manifolds
+    cut_ids : original ids of the cutters (the fracture surfaces)
+    params : BreakParams (``chips``, ``decimate``)
+    diag : the solid's bounding-box diagonal
+    rng : the chips' stream
+
+    Returns
+    -------
+    pieces : the damaged Manifolds, in the same order
+    damage_ids : ``cut_ids`` and the original ids of every chip (their faces are fracture)
+    """
+    damage_ids = set(cut_ids)
+    if params.chips > 0:
+        chipped = []
+        for piece in pieces:
+            piece, ids = _chip(piece, cut_ids=cut_ids, params=params, diag=diag, rng=rng)
+            damage_ids |= ids
+            chipped.append(piece)
+        pieces = chipped
+    if params.decimate > 0:
+        pieces = [p.simplify(params.decimate * diag) for p in pieces]
+    return pieces, damage_ids
+
+
+def _pose(world: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], *, params: BreakParams, diag: float,
+          pose_rng: np.random.Generator, noise_rng: np.random.Generator) -> list[Fragment]:
+    """Fragments in random poses (and with scan noise), sorted by name.
+
+    Parameters
+    ----------
+    world : (name, (n, 3) vertices in the object's frame, (m, 3) faces, (m,) labels) per fragment
+    params : BreakParams (``noise``)
+    diag : the solid's bounding-box diagonal
+    pose_rng, noise_rng : the poses' and the noise's streams
+
+    Returns
+    -------
+    list of Fragment, each with the ``T_world_fragment`` that puts it back
+    """
     fragments = []
     for name, v, f, labels in world:
         R = random_rotation(pose_rng)
@@ -766,8 +814,4 @@ def break_mesh(
             local = local + noise_rng.normal(0.0, params.noise * diag, local.shape)
         fragments.append(Fragment(name, local, f, labels, T_world_fragment))
     fragments.sort(key=lambda fr: fr.name)
-    contacts.sort(key=lambda c: (c.a, c.b))
-    stats = {"cuts": len(cut_ids), "chips": len(damage_ids) - len(cut_ids), "cut_styles": cuts,
-             "interior_cuts": len(interior_ids)}
-    log.info("broke into %d fragments with %d cuts, %d chips", len(fragments), stats["cuts"], stats["chips"])
-    return Puzzle(fragments, contacts, bbox_min, bbox_max, float(volume), float(area), stats)
+    return fragments

@@ -1,29 +1,85 @@
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
-from reassemble.pipeline import break_to_folder, read_puzzle, run_to_folder
+from reassemble.pipeline import break_to_folder, prepare_fragments, read_puzzle, run_to_folder
 from reassemble.synth import BreakParams
 
 
+class Puzzles:
+    """Puzzles of bundled meshes and their ``reassemble run`` (seed 0), each made at most once
+    per session, on first use; tests copy what they change. Several tests (and the smoke-set
+    cases of the same puzzle) share one run: an end-to-end run is the suite's costly part."""
+
+    def __init__(self, root):
+        self.root = root
+        self._puzzles, self._runs = {}, {}
+
+    def puzzle(self, mesh: str, pieces: int, seed: int):
+        """The folder of ``reassemble break MESH --pieces PIECES --seed SEED``."""
+        key = (mesh, pieces, seed)
+        if key not in self._puzzles:
+            out = self.root / f"{mesh}_{pieces:02d}p_s{seed}"
+            break_to_folder(mesh, out, params=BreakParams(pieces=pieces), seed=seed)
+            self._puzzles[key] = out
+        return self._puzzles[key]
+
+    def run(self, mesh: str, pieces: int, seed: int):
+        """The output folder of ``run_to_folder`` on that puzzle's fragments, seed 0."""
+        key = (mesh, pieces, seed)
+        if key not in self._runs:
+            out = self.root / f"{mesh}_{pieces:02d}p_s{seed}_run"
+            run_to_folder([self.puzzle(*key) / "fragments"], out, seed=0)
+            self._runs[key] = out
+        return self._runs[key]
+
+
 @pytest.fixture(scope="session")
-def puzzle_dir(tmp_path_factory):
+def puzzles(tmp_path_factory):
+    return Puzzles(tmp_path_factory.mktemp("puzzles"))
+
+
+COW = ("spot_low_resolution", 4, 1)  # the suite's puzzle (a smoke-set case too)
+SMALL_COW = ("spot_low_resolution", 2, 0)  # the smallest smoke-set case: two fragments
+TORUS3 = ("torus", 3, 0)  # a smoke-set case: three fragments, three pairs
+
+
+@pytest.fixture(scope="session")
+def puzzle_dir(puzzles):
     """A 4-piece rough-cut puzzle of the low-resolution cow, built once per session."""
-    out = tmp_path_factory.mktemp("puzzles") / "spot4"
-    break_to_folder("spot_low_resolution", out, params=BreakParams(pieces=4), seed=1)
-    return out
+    return puzzles.puzzle(*COW)
 
 
 @pytest.fixture(scope="session")
-def run_dir(puzzle_dir, tmp_path_factory):
+def cli_run(puzzle_dir, puzzles):
+    """`reassemble run` on the 4-piece cow through the console entry point, once per session:
+    (output folder, printed output). Tests copy the folder before changing it."""
+    out = puzzles.root / "cow_cli_run"
+    proc = subprocess.run([sys.executable, "-m", "reassemble", "run", str(puzzle_dir / "fragments"), "--out", str(out),
+                           "--seed", "0", "--jobs", "1", "--quiet"], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr
+    puzzles._runs[COW] = out  # the same run as run_to_folder(seed=0): the smoke-set case uses it too
+    return out, proc.stdout
+
+
+@pytest.fixture(scope="session")
+def run_dir(cli_run):
     """`reassemble run` on the 4-piece cow, once per session (tests copy it before changing it)."""
-    out = tmp_path_factory.mktemp("run") / "out"
-    run_to_folder([puzzle_dir / "fragments"], out, seed=0)
-    return out
+    return cli_run[0]
 
 
 @pytest.fixture(scope="session")
 def puzzle(puzzle_dir):
     return read_puzzle(puzzle_dir / "ground_truth.json")
+
+
+@pytest.fixture(scope="session")
+def prepared(puzzle):
+    """prepare_fragments (seed 0) of the 4-piece cow: (fragments, reference size). Not to be changed."""
+    meshes = {n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}
+    return prepare_fragments(meshes, seed=0)
 
 
 def tree_digest(root):

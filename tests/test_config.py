@@ -97,7 +97,11 @@ def test_cli_unknown_setting_is_a_one_line_error(tmp_path, capsys):
     assert err.count("\n") == 1 and not (tmp_path / "o").exists()
 
 
-def test_config_json_reproduces_the_run(run_dir, puzzle_dir, tmp_path, capsys):
+@pytest.mark.slow
+def test_config_json_reproduces_the_run(puzzles, tmp_path, capsys):
+    from .conftest import SMALL_COW
+
+    puzzle_dir, run_dir = puzzles.puzzle(*SMALL_COW), puzzles.run(*SMALL_COW)  # a smoke-set case: shared
     written = json.loads((run_dir / "config.json").read_text())
     config = read_config(run_dir / "config.json")
     recorded = {k: v for k, v in written.items() if k not in ("format", "reference_size", "vertex_noise", "note")}

@@ -12,6 +12,8 @@ from reassemble.holes import boundary_loops, fill_holes
 from reassemble.files import load_mesh, write_ply
 from reassemble.pipeline import Config, evaluate_files, read_puzzle, run_to_folder
 
+from .conftest import SMALL_COW
+
 
 def _capped_sphere(height: float):
     s = trimesh.creation.icosphere(subdivisions=3)
@@ -81,8 +83,9 @@ def test_the_loader_reads_an_open_scan_or_closes_it(tmp_path):
 
 
 @pytest.mark.slow
-def test_open_scanned_fragments_are_reassembled(puzzle_dir, tmp_path):
-    """Each fragment of the cow loses a patch of its original surface (an open scan)."""
+def test_open_scanned_fragments_are_reassembled(puzzles, tmp_path):
+    """Each fragment of the 2-piece cow loses a patch of its original surface (an open scan)."""
+    puzzle_dir = puzzles.puzzle(*SMALL_COW)
     puzzle = read_puzzle(puzzle_dir / "ground_truth.json")
     scans = tmp_path / "scans"
     punch_holes(puzzle_dir, scans, radius=0.03, seed=3)

@@ -15,12 +15,6 @@ from reassemble.segmentation import make_patches
 from reassemble.synth import BreakParams
 
 
-@pytest.fixture(scope="module")
-def prepared(puzzle):
-    meshes = {n: (m.vertices, m.faces) for n, m in puzzle.meshes.items()}
-    return prepare_fragments(meshes, seed=0)
-
-
 def f1(labels, pred, w):
     tp = w[(labels == 1) & pred].sum()
     return 2 * tp / (w[labels == 1].sum() + w[pred].sum())

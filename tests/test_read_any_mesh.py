@@ -305,11 +305,14 @@ def _strict(transforms, puzzle_dir) -> float:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["cells", "soup"])
-def test_puzzle_of_bad_fragments_is_solved_as_well_as_the_clean_one(kind, puzzle_dir, run_dir, tmp_path):
-    """The 4-piece cow, every fragment either cut into cells that keep their walls (as
+def test_puzzle_of_bad_fragments_is_solved_as_well_as_the_clean_one(kind, puzzles, tmp_path):
+    """The 2-piece cow, every fragment either cut into cells that keep their walls (as
     Breaking Bad ships its pieces) or turned into a soup with duplicate and flipped faces."""
     from reassemble.pipeline import read_puzzle, run_to_folder
 
+    from .conftest import SMALL_COW
+
+    puzzle_dir, run_dir = puzzles.puzzle(*SMALL_COW), puzzles.run(*SMALL_COW)  # the clean run: a smoke-set case
     puzzle = read_puzzle(puzzle_dir / "ground_truth.json", with_labels=False)
     folder = tmp_path / kind
     folder.mkdir()

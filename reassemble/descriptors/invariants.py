@@ -180,6 +180,142 @@ def _convolve_at(spectrum: np.ndarray, kernels: list[np.ndarray], grid: Grid, po
     return bspline_eval(coeffs, u)
 
 
+def _check_radii(radii: np.ndarray, diag: float, params: DescriptorParams) -> None:
+    """Raise ReassembleError unless every radius is positive, finite and below ``diag``."""
+    if len(radii) == 0:
+        raise ReassembleError("no radii given (--radii)")
+    if not np.all(np.isfinite(radii)) or np.any(radii <= 0):
+        raise ReassembleError(f"radii must be positive (got {radii.tolist()})")
+    if np.any(radii > diag):
+        raise ReassembleError(
+            f"radius {radii.max():g} is larger than the object (bounding-box diagonal {diag:g}); "
+            "use smaller --radii, or --relative for fractions of the diagonal"
+        )
+    if params.resolution < 2 or params.d2_resolution < 2:
+        raise ReassembleError("--resolution must be at least 2 voxels per radius")
+
+
+def _add_time(timings: dict, key: str, since: float) -> None:
+    timings[key] = timings.get(key, 0.0) + time.perf_counter() - since
+
+
+def _volume_integrals(
+    scene, vertices: np.ndarray, faces: np.ndarray, solid: bool, radii: np.ndarray, points: np.ndarray,
+    params: DescriptorParams, timings: dict,
+) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
+    """V_r and P_r (and, with ``params.principal``, the covariance curvatures) at the points.
+
+    Radii of one octave of ``r / h`` share an occupancy grid and its forward FFT.
+
+    Parameters
+    ----------
+    scene : ray-casting scene of the mesh (:func:`geometry.make_scene`)
+    vertices : (v, 3) float64, faces : (f, 3) int64
+    solid : the mesh is a closed solid (ray parity) rather than any surface (winding number)
+    radii : (m,) kernel radii
+    points : (n, 3) query points
+    params : DescriptorParams
+    timings : seconds per stage, added to in place
+
+    Returns
+    -------
+    V, P : (n, m); principal : None, or K2_cov (n, m), dir1 (n, m, 3), normal (n, m, 3)
+    """
+    from scipy.fft import rfftn
+
+    bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
+    n, m = len(points), len(radii)
+    V = np.empty((n, m))
+    P = np.empty((n, m))
+    if params.principal:
+        K2c, dir1, normal = np.empty((n, m)), np.empty((n, m, 3)), np.empty((n, m, 3))
+    r_min = radii.min()
+    level = np.floor(np.log2(radii / r_min) + 1e-9).astype(int)
+    winding = None
+    if not solid:
+        from ..repair import WindingNumber
+
+        winding = WindingNumber(vertices, faces)  # one hierarchy for every grid
+    for lev in np.unique(level):
+        idx = np.flatnonzero(level == lev)
+        h = r_min * 2.0**lev / params.resolution
+        # the FFT convolution is circular: a ball at the object's edge may wrap into the
+        # margin on the other side, which is empty when margin > r/2; plus the ramp and
+        # the spline stencil
+        grid = make_grid(bbox_min, bbox_max, h=h, margin=0.5 * radii[idx].max() + 4 * h)
+        _check_grid(grid, params.max_memory, f"radius {radii[idx].max():g}")
+        t = time.perf_counter()
+        if solid:
+            occ = occupancy(scene, grid, width=params.antialias)
+        else:
+            occ = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding)
+        _add_time(timings, "voxelize", t)
+        t = time.perf_counter()
+        spectrum = rfftn(occ, workers=-1)
+        del occ
+        kernels = []
+        for i in idx:
+            kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, radii[i]))
+        values = _convolve_at(spectrum, kernels, grid, points)
+        if params.principal:
+            for j, i in enumerate(idx):
+                mom = _convolve_at(spectrum, ball_moment_spectra(grid.shape, grid.h, radii[i]), grid, points)
+                K2c[:, i], dir1[:, i], normal[:, i] = principal_from_moments(
+                    values[:, 2 * j], mom[:, :3], mom[:, 3:], radii[i]
+                )
+        # The ramp averages the solid over offsets of variance s2: V gains s2/2 * V'' and
+        # P s2/2 * P'', with V'' = pi r^2 H and P'' = pi r^4 H / 2 to leading order.
+        s2 = (params.antialias * h) ** 2 / 12.0
+        r_lev = radii[idx]
+        H_smooth = mean_curvature(values[:, 0::2], r_lev)
+        V[:, idx] = values[:, 0::2] - 0.5 * s2 * np.pi * r_lev**2 * H_smooth
+        P[:, idx] = values[:, 1::2] - 0.25 * s2 * np.pi * r_lev**4 * H_smooth
+        _add_time(timings, "volume_fft", t)
+        log.info("V, P for r = %s on a %s grid (h = %.3g)", radii[idx].round(6).tolist(), grid.shape, h)
+    return V, P, ((K2c, dir1, normal) if params.principal else None)
+
+
+def _distance_integrals(
+    scene, vertices: np.ndarray, faces: np.ndarray, radii: np.ndarray, points: np.ndarray,
+    params: DescriptorParams, timings: dict,
+) -> np.ndarray:
+    """D2_r at the points: the squared distance to the surface integrated over each ball.
+
+    Parameters
+    ----------
+    scene, vertices, faces, radii, points, params, timings : as in :func:`_volume_integrals`
+
+    Returns
+    -------
+    (n, m) D2
+    """
+    from scipy.fft import rfftn
+
+    bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
+    D2 = np.full((len(points), len(radii)), np.nan)
+    area = face_areas(vertices, faces).sum()
+    for i, r in enumerate(radii):
+        h = r / params.d2_resolution
+        # exact d^2 wherever the spline of the samples can reach inside the ball, then a
+        # smooth roll-off (a kink would ring into every ball)
+        exact, band = r + h, r + 5 * h  # measured: a shorter roll-off rings more
+        grid = make_grid(bbox_min, bbox_max, h=h, margin=band + 2 * h)
+        _check_grid(grid, params.max_memory, f"D2 at radius {r:g}")
+        t = time.perf_counter()
+        count = int(min(4e6, 8 * area / h**2))
+        samples, _ = sample_surface(vertices, faces, count, rng=np.random.default_rng(0))
+        sq = squared_distance(scene, grid, r=exact, band=band, surface_points=np.vstack([vertices, samples]))
+        _add_time(timings, "distance", t)
+        t = time.perf_counter()
+        spectrum = rfftn(sq, workers=-1)
+        del sq
+        far = float(saturated_square(np.array(band), exact, band))
+        (kernel,) = radial_on_grid(lambda k, r: (ball_spectrum(k, r),), grid.shape, grid.h, r)
+        D2[:, i] = _convolve_at(spectrum, [kernel], grid, points)[:, 0] + far * 4.0 * np.pi * r**3 / 3.0
+        _add_time(timings, "d2_fft", t)
+    return D2
+
+
 def integral_invariants(
     vertices: np.ndarray,
     faces: np.ndarray,
@@ -205,25 +341,12 @@ def integral_invariants(
     -------
     Descriptors
     """
-    from scipy.fft import rfftn
-
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     radii = np.asarray(radii, dtype=np.float64).ravel()
     points = vertices if points is None else np.asarray(points, dtype=np.float64)
-    bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
-    diag = float(np.linalg.norm(bbox_max - bbox_min))
-    if len(radii) == 0:
-        raise ReassembleError("no radii given (--radii)")
-    if not np.all(np.isfinite(radii)) or np.any(radii <= 0):
-        raise ReassembleError(f"radii must be positive (got {radii.tolist()})")
-    if np.any(radii > diag):
-        raise ReassembleError(
-            f"radius {radii.max():g} is larger than the object (bounding-box diagonal {diag:g}); "
-            "use smaller --radii, or --relative for fractions of the diagonal"
-        )
-    if params.resolution < 2 or params.d2_resolution < 2:
-        raise ReassembleError("--resolution must be at least 2 voxels per radius")
+    diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    _check_radii(radii, diag, params)
 
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -231,77 +354,11 @@ def integral_invariants(
     solid = is_closed_solid(faces)  # else: an open or non-manifold surface (repair.repair_surface)
     timings["bvh"] = time.perf_counter() - t0
 
-    n, m = len(points), len(radii)
-    V = np.empty((n, m))
-    P = np.empty((n, m))
-    D2 = np.full((n, m), np.nan)
-    if params.principal:
-        K2c, dir1, normal = np.empty((n, m)), np.empty((n, m, 3)), np.empty((n, m, 3))
-    r_min = radii.min()
-    level = np.floor(np.log2(radii / r_min) + 1e-9).astype(int)
-    winding = None
-    if not solid:
-        from ..repair import WindingNumber
-
-        winding = WindingNumber(vertices, faces)  # one hierarchy for every grid
-    for lev in np.unique(level):
-        idx = np.flatnonzero(level == lev)
-        h = r_min * 2.0**lev / params.resolution
-        # the FFT convolution is circular: a ball at the object's edge may wrap into the
-        # margin on the other side, which is empty when margin > r/2; plus the ramp and
-        # the spline stencil
-        grid = make_grid(bbox_min, bbox_max, h=h, margin=0.5 * radii[idx].max() + 4 * h)
-        _check_grid(grid, params.max_memory, f"radius {radii[idx].max():g}")
-        t = time.perf_counter()
-        if solid:
-            occ = occupancy(scene, grid, width=params.antialias)
-        else:
-            occ = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding)
-        timings["voxelize"] = timings.get("voxelize", 0.0) + time.perf_counter() - t
-        t = time.perf_counter()
-        spectrum = rfftn(occ, workers=-1)
-        del occ
-        kernels = []
-        for i in idx:
-            kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, radii[i]))
-        values = _convolve_at(spectrum, kernels, grid, points)
-        if params.principal:
-            for j, i in enumerate(idx):
-                mom = _convolve_at(spectrum, ball_moment_spectra(grid.shape, grid.h, radii[i]), grid, points)
-                K2c[:, i], dir1[:, i], normal[:, i] = principal_from_moments(
-                    values[:, 2 * j], mom[:, :3], mom[:, 3:], radii[i]
-                )
-        # The ramp averages the solid over offsets of variance s2: V gains s2/2 * V'' and
-        # P s2/2 * P'', with V'' = pi r^2 H and P'' = pi r^4 H / 2 to leading order.
-        s2 = (params.antialias * h) ** 2 / 12.0
-        r_lev = radii[idx]
-        H_smooth = mean_curvature(values[:, 0::2], r_lev)
-        V[:, idx] = values[:, 0::2] - 0.5 * s2 * np.pi * r_lev**2 * H_smooth
-        P[:, idx] = values[:, 1::2] - 0.25 * s2 * np.pi * r_lev**4 * H_smooth
-        timings["volume_fft"] = timings.get("volume_fft", 0.0) + time.perf_counter() - t
-        log.info("V, P for r = %s on a %s grid (h = %.3g)", radii[idx].round(6).tolist(), grid.shape, h)
-
+    V, P, principal = _volume_integrals(scene, vertices, faces, solid, radii, points, params, timings)
     if params.with_d2:
-        area = face_areas(vertices, faces).sum()
-        for i, r in enumerate(radii):
-            h = r / params.d2_resolution
-            # exact d^2 wherever the spline of the samples can reach inside the ball, then a
-            # smooth roll-off (a kink would ring into every ball)
-            exact, band = r + h, r + 5 * h  # measured: a shorter roll-off rings more
-            grid = make_grid(bbox_min, bbox_max, h=h, margin=band + 2 * h)
-            _check_grid(grid, params.max_memory, f"D2 at radius {r:g}")
-            t = time.perf_counter()
-            count = int(min(4e6, 8 * area / h**2))
-            samples, _ = sample_surface(vertices, faces, count, rng=np.random.default_rng(0))
-            sq = squared_distance(scene, grid, r=exact, band=band, surface_points=np.vstack([vertices, samples]))
-            timings["distance"] = timings.get("distance", 0.0) + time.perf_counter() - t
-            t = time.perf_counter()
-            spectrum = rfftn(sq, workers=-1)
-            del sq
-            far = float(saturated_square(np.array(band), exact, band))
-            (kernel,) = radial_on_grid(lambda k, r: (ball_spectrum(k, r),), grid.shape, grid.h, r)
-            D2[:, i] = _convolve_at(spectrum, [kernel], grid, points)[:, 0] + far * 4.0 * np.pi * r**3 / 3.0
-            timings["d2_fft"] = timings.get("d2_fft", 0.0) + time.perf_counter() - t
+        D2 = _distance_integrals(scene, vertices, faces, radii, points, params, timings)
+    else:
+        D2 = np.full((len(points), len(radii)), np.nan)
 
     timings["total"] = time.perf_counter() - t0
     H = mean_curvature(V, radii)
@@ -310,7 +367,8 @@ def integral_invariants(
         points=points.copy(), radii=radii.copy(), V=V, P=P, D2=D2, H=H, H_rob=H_rob,
         K2=curvature_difference_sq(D2, radii), timings=timings,
     )
-    if params.principal:
+    if principal is not None:
+        K2c, dir1, normal = principal
         half = 0.5 * np.sqrt(K2c)
         out.K2_cov, out.k1, out.k2 = K2c, H_rob + half, H_rob - half
         out.dir1, out.normal = dir1, normal

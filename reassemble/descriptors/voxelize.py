@@ -109,6 +109,26 @@ def inside_centres(scene, grid: Grid) -> np.ndarray:
     return inside
 
 
+def _either_side(changes: list[np.ndarray]) -> np.ndarray:
+    """(nx, ny, nz) bool: the voxels on either side of a change between neighbours.
+
+    Parameters
+    ----------
+    changes : per axis a, a bool array one shorter than the grid along a, True where
+        voxel i and i + 1 differ
+    """
+    shape = list(changes[0].shape)
+    shape[0] += 1
+    boundary = np.zeros(shape, bool)
+    for axis, change in enumerate(changes):
+        lo = [slice(None)] * 3
+        hi = [slice(None)] * 3
+        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+        boundary[tuple(lo)] |= change
+        boundary[tuple(hi)] |= change
+    return boundary
+
+
 def occupancy(scene, grid: Grid, *, width: float = 2.0) -> np.ndarray:
     """Anti-aliased occupancy ``clip(0.5 - sdf / (width h), 0, 1)`` of a closed mesh.
 
@@ -125,14 +145,7 @@ def occupancy(scene, grid: Grid, *, width: float = 2.0) -> np.ndarray:
     from scipy.ndimage import binary_dilation
 
     inside = inside_centres(scene, grid)
-    boundary = np.zeros(grid.shape, bool)
-    for axis in range(3):
-        change = np.diff(inside, axis=axis)
-        lo = [slice(None)] * 3
-        hi = [slice(None)] * 3
-        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
-        boundary[tuple(lo)] |= change
-        boundary[tuple(hi)] |= change
+    boundary = _either_side([np.diff(inside, axis=axis) for axis in range(3)])
     # boundary voxels lie within one step of the surface; the ramp reaches width/2 beyond
     band = binary_dilation(boundary, iterations=max(1, int(np.ceil(width / 2))))
     where = np.flatnonzero(band)
@@ -171,7 +184,6 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     -------
     (nx, ny, nz) float32
     """
-    import open3d as o3d
     from scipy.ndimage import binary_dilation
 
     from ..repair import WindingNumber
@@ -179,6 +191,52 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     vertices = np.asarray(vertices, np.float64)
     winding = winding or WindingNumber(vertices, faces)
     nx, ny, nz = grid.shape
+    ray_ids, k, sign = _column_crossings(scene, vertices, faces, grid)
+    diff = np.zeros((nx * ny, nz + 1), np.int16)  # |w| <= the faces a column crosses
+    np.add.at(diff, (ray_ids, k), sign)
+    w = np.cumsum(diff[:, :nz], axis=1, dtype=np.int16).astype(np.float32)  # (columns, nz)
+    suspect = np.bincount(ray_ids, sign, nx * ny) != 0
+    suspect |= _lattice_disagrees(w, grid, winding)
+    if suspect.any():
+        _exact_columns(w, np.flatnonzero(suspect), ray_ids, k, grid, winding)
+    w = w.reshape(grid.shape)
+    inside = w >= 0.5
+    # a jump of w between neighbours is a surface; across a hole it changes smoothly,
+    # and no distance is needed there (the ramp would be flat)
+    boundary = _either_side([np.abs(np.diff(w, axis=axis)) > 0.5 for axis in range(3)])
+    # the voxels either side of every crossing: open sheets whose two sides read alike too
+    inner = (k > 0) & (k < nz)
+    col_i, col_j = np.unravel_index(ray_ids[inner], (nx, ny))
+    boundary[col_i, col_j, k[inner]] = True
+    boundary[col_i, col_j, k[inner] - 1] = True
+    band = binary_dilation(boundary, iterations=max(1, int(np.ceil(width / 2))))
+    where = np.flatnonzero(band)
+    d = _distances(scene, grid, where)
+    ramp = np.clip(0.5 - np.where(inside.ravel()[where], -d, d) / (width * grid.h), 0.0, 1.0)
+    occ = np.clip(w, 0.0, 1.0).ravel()
+    near_surface = d < 0.5 * width * grid.h
+    occ[where[near_surface]] = ramp[near_surface]
+    return occ.reshape(grid.shape)
+
+
+def _column_crossings(scene, vertices: np.ndarray, faces: np.ndarray,
+                      grid: Grid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where one ray per grid column (along z) crosses the triangles, and which way.
+
+    Parameters
+    ----------
+    scene : ray-casting scene of the triangles
+    vertices : (n, 3) float64, faces : (m, 3) int
+    grid : Grid
+
+    Returns
+    -------
+    ray_ids : (c,) int64, the column (``i * ny + j``) of each crossing, ascending
+    k : (c,) int64, the first voxel centre past the crossing (0 ... nz)
+    sign : (c,) int64, +1 entering (against the face's normal), -1 leaving, 0 grazing
+    """
+    import open3d as o3d
+
     ua, ub = np.meshgrid(grid.axis(0), grid.axis(1), indexing="ij")
     start = grid.origin[2] - grid.h
     rays = np.zeros((ua.size, 6), np.float32)
@@ -199,51 +257,27 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     dup[1:] = (ray_ids[1:] == ray_ids[:-1]) & (t[1:] - t[:-1] < 1e-4 * grid.h) & (sign[1:] == sign[:-1])
     ray_ids, t, sign = ray_ids[~dup], t[~dup], sign[~dup]
     u = (t + start - grid.origin[2]) / grid.h
-    k = np.clip(np.ceil(u), 0, nz).astype(np.int64)  # first voxel centre past the crossing
-    diff = np.zeros((ua.size, nz + 1), np.int16)  # |w| <= the faces a column crosses
-    np.add.at(diff, (ray_ids, k), sign)
-    w = np.cumsum(diff[:, :nz], axis=1, dtype=np.int16).astype(np.float32)  # (columns, nz)
-    suspect = np.bincount(ray_ids, sign, ua.size) != 0
-    # what the running sum cannot see: a coarse lattice of exact values
+    k = np.clip(np.ceil(u), 0, grid.shape[2]).astype(np.int64)
+    return ray_ids, k, sign
+
+
+def _lattice_disagrees(w: np.ndarray, grid: Grid, winding) -> np.ndarray:
+    """(nx * ny,) bool: the columns near a point of the coarse lattice (every ``COARSE``
+    voxels) where the running sum ``w`` (columns, nz) is off the exact winding number by
+    more than ``LATTICE_TOL`` (what the running sum cannot see: through two holes, or
+    beside one)."""
+    nx, ny, _ = grid.shape
     ci, cj, ck = (np.unique(np.r_[np.arange(0, n, COARSE), n - 1]) for n in grid.shape)
     I, J, K = np.meshgrid(ci, cj, ck, indexing="ij")
     wl = winding(grid.origin + grid.h * np.column_stack([I.ravel(), J.ravel(), K.ravel()]))
     bad = (np.abs(wl - w.reshape(grid.shape)[I.ravel(), J.ravel(), K.ravel()]) > LATTICE_TOL).reshape(I.shape)
     bad = bad.any(axis=2)
-    if bad.any():
-        near = np.zeros((nx, ny), bool)  # the columns of every lattice cell with a bad corner
-        for a, b in zip(*np.nonzero(bad)):
-            i0, i1 = ci[max(a - 1, 0)], ci[min(a + 1, len(ci) - 1)] + 1
-            j0, j1 = cj[max(b - 1, 0)], cj[min(b + 1, len(cj) - 1)] + 1
-            near[i0:i1, j0:j1] = True
-        suspect |= near.ravel()
-    if suspect.any():
-        _exact_columns(w, np.flatnonzero(suspect), ray_ids, k, grid, winding)
-    w = w.reshape(grid.shape)
-    inside = w >= 0.5
-    boundary = np.zeros(grid.shape, bool)
-    for axis in range(3):
-        # a jump of w between neighbours is a surface; across a hole it changes smoothly,
-        # and no distance is needed there (the ramp would be flat)
-        change = np.abs(np.diff(w, axis=axis)) > 0.5
-        lo = [slice(None)] * 3
-        hi = [slice(None)] * 3
-        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
-        boundary[tuple(lo)] |= change
-        boundary[tuple(hi)] |= change
-    # the voxels either side of every crossing: open sheets whose two sides read alike too
-    inner = (k > 0) & (k < nz)
-    col_i, col_j = np.unravel_index(ray_ids[inner], (nx, ny))
-    boundary[col_i, col_j, k[inner]] = True
-    boundary[col_i, col_j, k[inner] - 1] = True
-    band = binary_dilation(boundary, iterations=max(1, int(np.ceil(width / 2))))
-    where = np.flatnonzero(band)
-    d = _distances(scene, grid, where)
-    ramp = np.clip(0.5 - np.where(inside.ravel()[where], -d, d) / (width * grid.h), 0.0, 1.0)
-    occ = np.clip(w, 0.0, 1.0).ravel()
-    near_surface = d < 0.5 * width * grid.h
-    occ[where[near_surface]] = ramp[near_surface]
-    return occ.reshape(grid.shape)
+    near = np.zeros((nx, ny), bool)  # the columns of every lattice cell with a bad corner
+    for a, b in zip(*np.nonzero(bad)):
+        i0, i1 = ci[max(a - 1, 0)], ci[min(a + 1, len(ci) - 1)] + 1
+        j0, j1 = cj[max(b - 1, 0)], cj[min(b + 1, len(cj) - 1)] + 1
+        near[i0:i1, j0:j1] = True
+    return near.ravel()
 
 
 COARSE = 8  # lattice step (voxels) of the exact winding numbers that check the running sum

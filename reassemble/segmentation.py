@@ -69,11 +69,10 @@ class SegmentParams:
     merge_angle : a patch too small for a quadric fit joins the neighbour across its
         flattest boundary when that boundary's mean dihedral angle is under this (degrees;
         0: never), so a real crease stays a boundary
-    method : the patch evidence the graph cut takes: ``"mixture"``, the Gaussian mixture
-        of the roughness scores, or ``"learned"``, the classifier shipped in
-        ``reassemble/data/segmenter.npz`` (:mod:`segmenter`): far better labels on breaks
-        smoother than the object, not yet the default until whole runs confirm it
-        (``docs/method/segmentation.md``)
+    method : the patch evidence the graph cut takes: ``"learned"``, the classifier shipped
+        in ``reassemble/data/segmenter.npz`` (:mod:`segmenter`), or ``"mixture"``, the
+        Gaussian mixture of the roughness scores, which holds only where the break is
+        rougher than the object (``docs/method/segmentation.md``)
 
     Notes
     -----
@@ -89,7 +88,7 @@ class SegmentParams:
     min_fracture_share: float = 0.1
     noise_smoothing: int = 5
     merge_angle: float = 45.0
-    method: str = "mixture"
+    method: str = "learned"
 
     def __post_init__(self):
         if self.method not in METHODS:

@@ -181,18 +181,19 @@ def main(argv: list[str] | None = None) -> int:
     rows = np.concatenate([d["rows"] for d in data])
     label = np.concatenate([d["label"] for d in data])
     weight = np.concatenate([d["weight"] for d in data])
-    keep = np.array([n not in set(filter(None, args.drop.split(","))) for n in segmenter.FEATURE_NAMES])
+    dropped = set(filter(None, args.drop.split(",")))
+    keep = np.array([n not in dropped for n in segmenter.FEATURE_NAMES])
     full_rows, rows = rows, rows[:, keep]
     puzzle = np.concatenate([np.full(len(d["label"]), k) for k, d in enumerate(data)])
     base = {s.name for s in training_specs("tuning", max_pieces=args.max_pieces)}
-    extra_of = np.concatenate([np.full(len(d["label"]), s.name not in base, float) for s, d in zip(kept, data)])
+    in_base = np.concatenate([np.full(len(d["label"]), s.name in base) for s, d in zip(kept, data)])
     group = np.concatenate([np.full(len(d["label"]), s.mesh) for s, d in zip(kept, data)])
     bias, cv = (0.0, {}) if args.folds < 2 else choose_bias(rows, label, weight, puzzle, group, folds=args.folds)
     if cv:
         print(f"log-odds offset {bias:+.1f}: out-of-fold mean puzzle F1 {cv['f1_no_bias']:.3f} -> {cv['f1']:.3f} "
               f"({args.folds} mesh folds)", flush=True)
     # with --extra, two models (the base puzzles; all of them) whose log-odds are averaged
-    parts = [np.ones(len(label), bool)] if not args.extra else [extra_of < 0.5, np.ones(len(label), bool)]
+    parts = [in_base, np.ones(len(label), bool)] if args.extra else [np.ones(len(label), bool)]
     models = [fit(rows[p], label[p], weight[p]) for p in parts]
     meta = {"format": segmenter.MODEL_FORMAT, "features": list(segmenter.FEATURE_NAMES), "command": command,
             "commit": _commit(), "trained_on": names, "params": PARAMS,

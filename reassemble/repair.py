@@ -580,10 +580,11 @@ def solid_mesh(vertices: np.ndarray, faces: np.ndarray, *, steps: int = REMESH_S
     h = float(np.max(hi - lo)) / steps
     grid = make_grid(lo, hi, h=h, margin=3 * h)
     occ = winding_occupancy(make_scene(vertices, faces), vertices, faces, grid).astype(np.float64)
-    axes = [grid.axis(a) for a in range(3)]
-    X, Y, Z = np.meshgrid(*axes, indexing="ij")
-    points = np.column_stack([X.ravel(order="F"), Y.ravel(order="F"), Z.ravel(order="F")])
-    v, f, _ = igl.marching_cubes(occ.ravel(order="F"), points, *grid.shape, 0.5)
+    # the lattice in x-fastest order, filled by broadcasting (a meshgrid's copies cost seconds)
+    points = np.empty(grid.shape[::-1] + (3,))
+    for a in range(3):
+        points[..., a] = grid.axis(a).reshape([-1 if b == 2 - a else 1 for b in range(3)])
+    v, f, _ = igl.marching_cubes(occ.ravel(order="F"), points.reshape(-1, 3), *grid.shape, 0.5)
     v, f = np.asarray(v, np.float64), np.asarray(f, np.int64)
     if signed_volume(v, f) < 0:
         f = f[:, ::-1]

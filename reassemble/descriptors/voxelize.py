@@ -311,9 +311,7 @@ def _exact_columns(w: np.ndarray, columns: np.ndarray, ray_ids: np.ndarray, k: n
 
     sample = at(np.r_[i, i, i], np.r_[j, j, j], np.r_[a, mid, b - 1]).reshape(3, -1)
     constant = np.ptp(sample, axis=0) <= CONSTANT
-    # every voxel's stretch, start and end
-    x = np.arange(nz)
-    stretch = np.full((len(columns), nz), -1)
+    # every voxel's stretch
     starts = np.zeros((len(columns), nz), bool)
     starts[r, a] = True
     sid = np.cumsum(starts.ravel()) - 1  # stretches are numbered in row-major order of their starts
@@ -325,18 +323,16 @@ def _exact_columns(w: np.ndarray, columns: np.ndarray, ray_ids: np.ndarray, k: n
     block[cst] = sample[1][stretch[cst]]
     var = valid & ~constant[stretch]
     if var.any():
-        s0, s1 = a[stretch], b[stretch] - 1
-        on = var & (((x[None] - s0) % STRIDE == 0) | (x[None] == s1))
+        rr, xx = np.nonzero(var)  # the varying voxels only: the block can be millions
+        st = stretch[rr, xx]
+        s0, s1 = a[st], b[st] - 1
+        on = ((xx - s0) % STRIDE == 0) | (xx == s1)
         exact = np.full(block.shape, np.nan)
-        rr, xx = np.nonzero(on)
-        exact[rr, xx] = at(i[stretch[rr, xx]], j[stretch[rr, xx]], xx)
-        lo = s0 + ((x[None] - s0) // STRIDE) * STRIDE
+        exact[rr[on], xx[on]] = at(i[st[on]], j[st[on]], xx[on])
+        lo = s0 + ((xx - s0) // STRIDE) * STRIDE
         hi = np.minimum(lo + STRIDE, s1)
-        span = np.maximum(hi - lo, 1)
-        wt = (x[None] - lo) / span
-        rr, xx = np.nonzero(var)
-        l, h = lo[rr, xx], hi[rr, xx]
-        block[rr, xx] = exact[rr, l] * (1 - wt[rr, xx]) + exact[rr, h] * wt[rr, xx]
+        wt = (xx - lo) / np.maximum(hi - lo, 1)
+        block[rr, xx] = exact[rr, lo] * (1 - wt) + exact[rr, hi] * wt
     w[columns] = block
 
 

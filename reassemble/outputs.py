@@ -171,6 +171,7 @@ def run_report(result, *, warnings: list[str]) -> dict:
             "vertex_noise": rounded(set_noise(frags) / size), "contact_tolerance": rounded(reg.tolerance),
             "gap": rounded(reg.gap), "thin_walled": thin_walled(frags),
             "timings_s": {k: round(v, 2) for k, v in result.timings.items()},
+            **({"fallback": result.fallback} if result.fallback else {}),
         },
         "groups": groups,
         "fragments": _fragment_report(result, groups),

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import assembly
+from . import arbiter, assembly
 from .config import Config
 from .descriptors import DescriptorParams, integral_invariants
 from .errors import ReassembleError
@@ -52,6 +52,9 @@ class Result:
     T_world : (n, 4, 4) T_world_fragment per fragment (:func:`assembly.world_poses`)
     touching : per contact of the assembly, the touching points of either fragment
     timings : seconds per step
+    fallback : when the set was segmented again (``config.segment.fallback``): the method,
+        whether its assembly was kept, and both assemblies' whole-surface (contact,
+        penetration) areas over the reference size squared; else None
     """
 
     config: Config
@@ -62,6 +65,7 @@ class Result:
     T_world: np.ndarray | None = None
     touching: list | None = None
     timings: dict = dataclasses.field(default_factory=dict)
+    fallback: dict | None = None
 
 
 def reassemble(
@@ -72,27 +76,61 @@ def reassemble(
 
     ``assemble`` False stops after matching the pairs (what ``reassemble match`` writes).
     ``jobs`` > 1 describes fragments and registers pairs in that many processes; the
-    result does not depend on it.
+    result does not depend on it. When the assembly leaves fragments unplaced, the set is
+    segmented again with ``config.segment.fallback`` evidence and matched and assembled
+    again; the assembly with more whole-surface contact is kept (:mod:`arbiter`).
     """
+    config.check()
     t0 = time.perf_counter()
-    frags, size = prepare_fragments(meshes, config=config, seed=config.seed, jobs=jobs,
-                                    progress=progress)  # describe, segment, features
+    described = describe_fragments(meshes, config=config, jobs=jobs, progress=progress)
+    result = _match(described, config, jobs=jobs, progress=progress)
+    result.timings["prepare"] += time.perf_counter() - t0 - sum(result.timings.values())  # describing
+    if not assemble:
+        return result
+    _assemble(result, progress=progress)
+    fallback = config.segment.fallback
+    if fallback in (None, config.segment.method) or result.assembly.placed.all() or thin_walled(result.fragments):
+        return result
+    return _fallback(described, result, config, method=fallback, jobs=jobs, progress=progress)
+
+
+def _fallback(described: DescribedSet, first: Result, config: Config, *, method: str, jobs: int,
+              progress: bool) -> Result:
+    """Segment, match and assemble again with ``method`` evidence (``config`` as given, not
+    as resolved by the first try); keep the assembly with more whole-surface contact less
+    penetration (:mod:`arbiter`), ``first`` on a tie."""
+    t0 = time.perf_counter()
+    log.info("%d of %d fragments unplaced: segmenting with %s evidence too",
+             np.count_nonzero(~first.assembly.placed), len(first.fragments), method)
+    second = _match(described, dataclasses.replace(config, segment=dataclasses.replace(config.segment, method=method)),
+                    jobs=jobs, progress=progress)
+    _assemble(second, progress=progress)
+    scores = [arbiter.assembly_contact(r.assembly, [f.mesh for f in r.fragments], size=r.size,
+                                       params=r.config.registration, seed=config.seed) for r in (first, second)]
+    kept = second if arbiter.better(*scores, penetration_weight=config.registration.penetration_weight) else first
+    kept.timings = {**first.timings, "fallback": time.perf_counter() - t0}
+    kept.fallback = {"method": method, "kept": kept is second,
+                     "contact": {r.config.segment.method: [round(float(c) / r.size**2, 6) for c in score]
+                                 for r, score in zip((first, second), scores)}}
+    return kept
+
+
+def _match(described: DescribedSet, config: Config, *, jobs: int, progress: bool) -> Result:
+    """The segment, features and pairs steps on a described set."""
+    t0 = time.perf_counter()
+    frags, size = prepare_fragments({}, config=config, seed=config.seed, described=described)
     registration = registration_params(frags, size=size, params=config.registration)
     t1 = time.perf_counter()
     pairs, registration = match_set(frags, size=size, params=registration, gap=config.gap, seed=config.seed,
                                     jobs=jobs, progress=progress)
-    t2 = time.perf_counter()
     resolved = dataclasses.replace(config, thin_walls=thin_walled(frags), gap=registration.gap,
                                    registration=registration)
-    result = Result(resolved, frags, size, pairs, timings={"prepare": t1 - t0, "pairs": t2 - t1})
-    if assemble:
-        _assemble(result, progress=progress)
-        result.timings["assembly"] = time.perf_counter() - t2
-    return result
+    return Result(resolved, frags, size, pairs, timings={"prepare": t1 - t0, "pairs": time.perf_counter() - t1})
 
 
 def _assemble(result: Result, *, progress: bool) -> None:
     """The assemble step: global assembly, world poses, touching points of every contact."""
+    t0 = time.perf_counter()
     frags, size, config, reg = result.fragments, result.size, result.config, result.config.registration
     if progress:
         log.info("assembling %d fragments", len(frags))
@@ -103,6 +141,7 @@ def _assemble(result: Result, *, progress: bool) -> None:
     result.touching = assembly.contact_points(result.assembly, surfaces, meshes, tol=reg.tolerance * size,
                                               normal_angle=reg.normal_angle, count=config.assembly.touching_points,
                                               gap=reg.gap * size)
+    result.timings["assembly"] = time.perf_counter() - t0
 
 
 def _load(inputs, out, *, config: Config, seed: int | None, force: bool):

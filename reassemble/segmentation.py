@@ -73,6 +73,9 @@ class SegmentParams:
         in ``reassemble/data/segmenter.npz`` (:mod:`segmenter`), or ``"mixture"``, the
         Gaussian mixture of the roughness scores, which holds only where the break is
         rougher than the object (``docs/method/segmentation.md``)
+    fallback : the method a run segments with again when its assembly leaves fragments
+        unplaced; the assembly with more whole-surface contact is kept
+        (:mod:`arbiter`). None: never
 
     Notes
     -----
@@ -89,12 +92,14 @@ class SegmentParams:
     noise_smoothing: int = 5
     merge_angle: float = 45.0
     method: str = "learned"
+    fallback: str | None = "mixture"
 
     def __post_init__(self):
-        if self.method not in METHODS:
-            from .errors import ReassembleError
+        from .errors import ReassembleError
 
-            raise ReassembleError(f"segment.method must be one of {', '.join(METHODS)} (got {self.method!r})")
+        for name, value in (("method", self.method), ("fallback", self.fallback)):
+            if value not in METHODS and not (name == "fallback" and value is None):
+                raise ReassembleError(f"segment.{name} must be one of {', '.join(METHODS)} (got {value!r})")
 
 
 @dataclass

@@ -35,6 +35,10 @@ class Puzzles:
             self._runs[key] = out
         return self._runs[key]
 
+    def share_run(self, mesh: str, pieces: int, seed: int, out):
+        """Record ``out`` as that puzzle's run, made elsewhere with the same options."""
+        self._runs[(mesh, pieces, seed)] = out
+
 
 @pytest.fixture(scope="session")
 def puzzles(tmp_path_factory):
@@ -60,7 +64,7 @@ def cli_run(puzzle_dir, puzzles):
     proc = subprocess.run([sys.executable, "-m", "reassemble", "run", str(puzzle_dir / "fragments"), "--out", str(out),
                            "--seed", "0", "--jobs", "1", "--quiet"], capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr
-    puzzles._runs[COW] = out  # the same run as run_to_folder(seed=0): the smoke-set case uses it too
+    puzzles.share_run(*COW, out)  # the same run as run_to_folder(seed=0): the smoke-set case uses it too
     return out, proc.stdout
 
 

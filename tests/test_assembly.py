@@ -8,7 +8,6 @@ import pytest
 
 from data_synth.sets import PuzzleSpec, smoke_set
 from reassemble.assembly import Assembly, refine, world_poses
-from reassemble.config import Config, with_setting
 from reassemble.errors import ReassembleError
 from reassemble.geometry import invert_transform, make_transform, random_rotation, rotation_angle_deg
 from reassemble.files import read_transforms
@@ -186,10 +185,10 @@ def test_missing_fragment_others_still_right(puzzles, tmp_path):
     names = sorted(p.stem for p in (puzzle / "fragments").iterdir())
     for n in names[1:]:  # one fragment lost
         shutil.copy(puzzle / "fragments" / f"{n}.ply", frags)
-    # the subject is assembly with a fragment lost, not segmentation: the learned evidence
-    # misses one smooth, rimless break face of this torus (docs/method/segmentation.md,
-    # known failures), so the roughness mixture labels it
-    run_to_folder([frags], tmp_path / "out", seed=0, config=with_setting(Config(), "segment.method=mixture"))
+    # the learned evidence misses one smooth, rimless break face of this torus
+    # (docs/method/segmentation.md, known failures): the fallback segmentation finds it
+    report = run_to_folder([frags], tmp_path / "out", seed=0)
+    assert report["summary"]["fallback"]["kept"], report["summary"]
     T = read_transforms(tmp_path / "out" / "transforms.json")
     truth = read_transforms(puzzle / "ground_truth.json")
     assert sorted(T) == names[1:] and all(t["placed"] for t in T.values())
@@ -289,10 +288,7 @@ def test_heavy_noise_is_matched_on_smoothed_copies(tmp_path):
 
     puzzle = tmp_path / "puzzle"
     break_to_folder("torus", puzzle, params=BreakParams(pieces=4, noise=0.005), seed=0)
-    # the subject is matching on smoothed copies; under this heavy noise the learned
-    # evidence misses breaks of the smooth torus (docs/method/segmentation.md, known failures)
-    report = run_to_folder([puzzle / "fragments"], tmp_path / "out", seed=0,
-                           config=with_setting(Config(), "segment.method=mixture"))
+    report = run_to_folder([puzzle / "fragments"], tmp_path / "out", seed=0)
     assert all(f["smoothing_iterations"] > 0 for f in report["fragments"].values())
     s = _score(tmp_path / "out", puzzle)
     assert s["solved"], s

@@ -47,6 +47,8 @@ def test_set_overrides_one_value_with_its_type():
     ("segment.crease_angle", "not NAME=VALUE"),
     ("segment=1", "unknown option 'segment'"),
     ("break.hurst=0.5", "not used by this command"),
+    ("segment.method=none", "segment.method must be one of learned, mixture"),
+    ("segment.fallback=roughness", "segment.fallback must be one of learned, mixture"),
 ])
 def test_set_errors_are_one_line(setting, message):
     with pytest.raises(ReassembleError, match=message) as err:

@@ -89,7 +89,9 @@ def reassemble(
         return result
     _assemble(result, progress=progress)
     fallback = config.segment.fallback
-    if fallback in (None, config.segment.method) or result.assembly.placed.all() or thin_walled(result.fragments):
+    # another segmentation can only help a fragment that was described and still not placed
+    waiting = [not p and f.descriptors is not None for p, f in zip(result.assembly.placed, result.fragments)]
+    if fallback in (None, config.segment.method) or not any(waiting) or thin_walled(result.fragments):
         return result
     return _fallback(described, result, config, method=fallback, jobs=jobs, progress=progress)
 

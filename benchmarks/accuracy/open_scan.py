@@ -1,6 +1,6 @@
 """Open scans: the Stanford bunny scan (holes in its base) and fragments scanned with holes.
 
-    python -m benchmarks.accuracy.open_scan                       # ../shared/data/meshes/stanford-bunny-scan
+    python -m benchmarks.accuracy.open_scan --shared ../shared    # data/meshes/stanford-bunny-scan in it
     python -m benchmarks.accuracy.open_scan MESH --pieces 4,8 --seeds 0,1,2
 
 Two cases, each run with ``--fill-holes`` and scored with ``reassemble eval``:
@@ -21,15 +21,16 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import ROOT, add_json_option, start, table
+from benchmarks.common import add_json_option, start, table
 from data_synth.scans import punch_holes
 
-DEFAULT = ROOT.parent / "shared" / "data" / "meshes" / "stanford-bunny-scan" / "stanford-bunny.obj"
+SHARED_PATH = ("data", "meshes", "stanford-bunny-scan", "stanford-bunny.obj")  # under --shared
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("mesh", type=Path, nargs="?", default=DEFAULT)
+    parser.add_argument("mesh", type=Path, nargs="?", help="default: the one under --shared")
+    parser.add_argument("--shared", type=Path, help="the third-party data folder (../shared)")
     parser.add_argument("--pieces", default="4,8")
     parser.add_argument("--seeds", default="0,1")
     parser.add_argument("--hole", type=float, default=0.03, help="radius of the holes punched / diagonal")
@@ -37,6 +38,10 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=2)
     add_json_option(parser)
     args = parser.parse_args()
+    if args.mesh is None:
+        if args.shared is None:
+            parser.error("give MESH or --shared DIR (the folder holding data/meshes)")
+        args.mesh = args.shared.joinpath(*SHARED_PATH)
     run = start()
     from reassemble.errors import ReassembleError
     from reassemble.files import load_mesh

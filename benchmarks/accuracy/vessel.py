@@ -1,6 +1,6 @@
 """The third-party vessel set: thin-walled sherds with gaps between them, scored against the truth.
 
-    python -m benchmarks.accuracy.vessel                  # ../shared/data/meshes/vessel-TU_96_2-5-fragments
+    python -m benchmarks.accuracy.vessel --shared ../shared   # data/meshes/vessel-TU_96_2-5-fragments in it
     python -m benchmarks.accuracy.vessel FOLDER --jobs 2
 
 The fragments are stored in their assembled pose (the truth is the identity for each). They
@@ -33,20 +33,25 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import ROOT, add_json_option, start, table
+from benchmarks.common import add_json_option, start, table
 
-DEFAULT = ROOT.parent / "shared" / "data" / "meshes" / "vessel-TU_96_2-5-fragments"
+SHARED_PATH = ("data", "meshes", "vessel-TU_96_2-5-fragments")  # under --shared
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("folder", type=Path, nargs="?", default=DEFAULT)
+    parser.add_argument("folder", type=Path, nargs="?", help="default: the one under --shared")
+    parser.add_argument("--shared", type=Path, help="the third-party data folder (../shared)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--gap", type=float, default=None, help="as run --gap (default: measured)")
     parser.add_argument("--diagnose", action="store_true", help="what the geometry says about the gaps")
     add_json_option(parser)
     args = parser.parse_args()
+    if args.folder is None:
+        if args.shared is None:
+            parser.error("give FOLDER or --shared DIR (the folder holding data/meshes)")
+        args.folder = args.shared.joinpath(*SHARED_PATH)
     run = start()
     from reassemble.geometry import face_areas, invert_transform, make_transform, random_rotation, transform_points
     from reassemble.files import load_mesh, read_json, write_ply

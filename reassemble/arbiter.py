@@ -31,39 +31,46 @@ def whole_surface(vertices: np.ndarray, faces: np.ndarray, count: int, *, rng: n
 
 
 def assembly_contact(
-    assembly: Assembly, meshes: list[tuple[np.ndarray, np.ndarray]], *, size: float, params: RegistrationParams,
-    count: int = 4000, seed: int = 0,
-) -> tuple[float, float]:
-    """(contact area, penetration area), mesh units squared, summed over every two fragments
-    of a sub-assembly, on whole-surface samples (:func:`whole_surface`).
+    assemblies: list[Assembly], meshes: list[tuple[np.ndarray, np.ndarray]], *, size: float,
+    params: RegistrationParams, count: int = 4000, seed: int = 0,
+) -> list[tuple[float, float]]:
+    """Per assembly, (contact area, penetration area), mesh units squared, summed over every
+    two fragments of a sub-assembly, on whole-surface samples (:func:`whole_surface`),
+    drawn once per fragment for all the assemblies.
 
     Parameters
     ----------
-    assembly : the Assembly (poses in each sub-assembly's frame)
+    assemblies : Assemblies of the same fragments (poses in each sub-assembly's frame)
     meshes : (vertices (n, 3), faces (f, 3)) per fragment, closed, in its own coordinates
     size : reference size (mesh units); ``params.tolerance`` and ``params.gap`` are fractions of it
-    params : the RegistrationParams the assembly was made with
+    params : the RegistrationParams the assemblies were made with
     count : samples per fragment
     seed : for the samples
     """
     rngs = np.random.default_rng(seed).spawn(len(meshes))
     surfaces, scenes = {}, {}
-    contact = penetration = 0.0
-    for g in np.unique(assembly.group):
-        members = np.flatnonzero(assembly.group == g)
-        for x, p in enumerate(members):
-            for q in members[x + 1:]:
-                for k in (p, q):
-                    if k not in surfaces:
-                        surfaces[k] = whole_surface(*meshes[k], count, rng=rngs[k])
-                        scenes[k] = make_scene(*meshes[k])
-                T_q_p = invert_transform(assembly.T_group_fragment[q]) @ assembly.T_group_fragment[p]
-                _, c, pen = contact_score(surfaces[p], surfaces[q], T_q_p, source_scene=scenes[p],
-                                          target_scene=scenes[q], tol=params.tolerance * size, params=params,
-                                          gap=params.gap * size)
-                contact += c
-                penetration += pen
-    return contact, penetration
+
+    def fragment(k):
+        if k not in surfaces:
+            surfaces[k] = whole_surface(*meshes[k], count, rng=rngs[k])
+            scenes[k] = make_scene(*meshes[k])
+        return surfaces[k], scenes[k]
+
+    out = []
+    for assembly in assemblies:
+        contact = penetration = 0.0
+        for g in np.unique(assembly.group):
+            members = np.flatnonzero(assembly.group == g)
+            for x, p in enumerate(members):
+                for q in members[x + 1:]:
+                    (sp, scene_p), (sq, scene_q) = fragment(p), fragment(q)
+                    T_q_p = invert_transform(assembly.T_group_fragment[q]) @ assembly.T_group_fragment[p]
+                    _, c, pen = contact_score(sp, sq, T_q_p, source_scene=scene_p, target_scene=scene_q,
+                                              tol=params.tolerance * size, params=params, gap=params.gap * size)
+                    contact += c
+                    penetration += pen
+        out.append((contact, penetration))
+    return out
 
 
 def better(a: tuple[float, float], b: tuple[float, float], *, penetration_weight: float) -> bool:

@@ -83,8 +83,9 @@ def reassemble(
     config.check()
     t0 = time.perf_counter()
     described = describe_fragments(meshes, config=config, jobs=jobs, progress=progress)
+    describing = time.perf_counter() - t0
     result = _match(described, config, jobs=jobs, progress=progress)
-    result.timings["prepare"] += time.perf_counter() - t0 - sum(result.timings.values())  # describing
+    result.timings["prepare"] += describing
     if not assemble:
         return result
     _assemble(result, progress=progress)
@@ -107,8 +108,9 @@ def _fallback(described: DescribedSet, first: Result, config: Config, *, method:
     second = _match(described, dataclasses.replace(config, segment=dataclasses.replace(config.segment, method=method)),
                     jobs=jobs, progress=progress)
     _assemble(second, progress=progress)
-    scores = [arbiter.assembly_contact(r.assembly, [f.mesh for f in r.fragments], size=r.size,
-                                       params=r.config.registration, seed=config.seed) for r in (first, second)]
+    # the same described meshes and size in both: one set of whole-surface samples
+    scores = arbiter.assembly_contact([first.assembly, second.assembly], [f.mesh for f in first.fragments],
+                                      size=first.size, params=first.config.registration, seed=config.seed)
     kept = second if arbiter.better(*scores, penetration_weight=config.registration.penetration_weight) else first
     kept.timings = {**first.timings, "fallback": time.perf_counter() - t0}
     kept.fallback = {"method": method, "kept": kept is second,

@@ -97,8 +97,8 @@ class SegmentParams:
     def __post_init__(self):
         from .errors import ReassembleError
 
-        for name, value in (("method", self.method), ("fallback", self.fallback)):
-            if value not in METHODS and not (name == "fallback" and value is None):
+        for name, value in (("method", self.method), ("fallback", self.method if self.fallback is None else self.fallback)):
+            if value not in METHODS:
                 raise ReassembleError(f"segment.{name} must be one of {', '.join(METHODS)} (got {value!r})")
 
 

@@ -108,9 +108,11 @@ def _fallback(described: DescribedSet, first: Result, config: Config, *, method:
     second = _match(described, dataclasses.replace(config, segment=dataclasses.replace(config.segment, method=method)),
                     jobs=jobs, progress=progress)
     _assemble(second, progress=progress)
-    # the same described meshes and size in both: one set of whole-surface samples
+    # the same described meshes and size in both: one set of whole-surface samples; each
+    # assembly scored at the gap it was made with
     scores = arbiter.assembly_contact([first.assembly, second.assembly], [f.mesh for f in first.fragments],
-                                      size=first.size, params=first.config.registration, seed=config.seed)
+                                      size=first.size, params=[first.config.registration, second.config.registration],
+                                      seed=config.seed)
     kept = second if arbiter.better(*scores, penetration_weight=config.registration.penetration_weight) else first
     kept.timings = {**first.timings, "fallback": time.perf_counter() - t0}
     kept.fallback = {"method": method, "kept": kept is second,

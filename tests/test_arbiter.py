@@ -1,6 +1,9 @@
 """Label-free comparison of assemblies: the true one closes its breaks, a wrong one does not."""
 
+import dataclasses
+
 import numpy as np
+import pytest
 
 from reassemble.arbiter import assembly_contact, better
 from reassemble.assembly import Assembly
@@ -35,7 +38,7 @@ def test_the_true_assembly_has_the_most_contact(puzzles):
     left_out = Assembly(T, np.array([0, 1, 0]), np.array([True, False, True]), np.ones(n))
     (contact, penetration), moved, alone = assembly_contact(
         [true, Assembly(wrong, np.zeros(n, int), np.ones(n, bool), np.ones(n)), left_out], meshes, size=size,
-        params=params)
+        params=[params] * 3)
     # each break is counted once, from one side of its pair: half the fracture area
     assert 0.8 * fracture / 2 < contact < 1.2 * fracture / 2, (contact, fracture)
     assert penetration < 0.02 * contact
@@ -43,3 +46,20 @@ def test_the_true_assembly_has_the_most_contact(puzzles):
     assert not better((contact, penetration), moved, penetration_weight=params.penetration_weight)
     assert alone[0] < contact and not better((contact, penetration), alone,
                                              penetration_weight=params.penetration_weight)
+
+
+def test_each_assembly_is_scored_at_its_own_gap(puzzles):
+    """A run that found its breaks a gap apart (material lost) and placed fragments badly must
+    not judge a right, closed assembly at its gap: there a closed break touches nowhere."""
+    meshes, T, _ = _truth(puzzles)
+    size, closed = reference_size(meshes), RegistrationParams()
+    gapped = dataclasses.replace(closed, gap=0.08)
+    n = len(meshes)
+    true = Assembly(T, np.zeros(n, int), np.ones(n, bool), np.ones(n))
+    half = Assembly(T, np.array([0, 0, 1]), np.array([True, True, False]), np.ones(n))
+    (c_half, p_half), (c_true, p_true) = assembly_contact([half, true], meshes, size=size, params=[gapped, closed])
+    assert better((c_half, p_half), (c_true, p_true), penetration_weight=closed.penetration_weight)
+    (at_other_gap, _), = assembly_contact([true], meshes, size=size, params=[gapped])
+    assert at_other_gap < 0.1 * c_true
+    with pytest.raises(ValueError, match="2 assemblies but 1"):
+        assembly_contact([half, true], meshes, size=size, params=[closed])

@@ -34,7 +34,8 @@ class AssemblyParams:
 
     Parameters
     ----------
-    candidates : candidate placements per pair that may propose a merge
+    candidates : candidate placements per pair that may propose a merge (registration gives
+        up to ``RegistrationParams.candidates + plane_candidates``)
     min_gain : a merge needs at least this verified gain (sum of the pair scores it creates)
     max_penetration : a merge is rejected when any two fragments it brings together
         interpenetrate by more than this share of the smaller one's surface area
@@ -48,7 +49,7 @@ class AssemblyParams:
     touching_points : touching points kept per contact, for the pictures (:func:`contact_points`)
     """
 
-    candidates: int = 5
+    candidates: int = 7
     min_gain: float = 0.02
     max_penetration: float = 0.02
     refine_iterations: int = 15

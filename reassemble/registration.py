@@ -72,6 +72,7 @@ class RegistrationParams:
     plane_area : planar break faces carrying at least this share of a fragment's fracture
         area also give placements by construction (:mod:`planes`), beside the signature
         hypotheses; 0 turns them off
+    plane_candidates : candidates from those placements, beside ``candidates``
     """
 
     tolerance: float = 0.006
@@ -102,6 +103,7 @@ class RegistrationParams:
     quick_contact: float = 1.5
     refinements: int = 2
     plane_area: float = 0.05
+    plane_candidates: int = 2
 
 
 def with_noise(params: RegistrationParams, *, noise: float, size: float) -> RegistrationParams:
@@ -693,24 +695,27 @@ def register_pair(
     tree = cKDTree(target.samples)
     quick = _quick_ranked(source, target, T, tree=tree, target_scene=target_scene, tol=tol, rtol=rtol, params=params)
     flat = _plane_hypotheses(source, target, tol=tol, params=params, rng=rng)
-    if len(flat):
-        # index -1: a placement by construction, no RANSAC inliers
-        quick += [(q, -1, coarse) for q, _, coarse in _quick_ranked(
-            source, target, flat, tree=tree, target_scene=target_scene, tol=tol, rtol=rtol, params=params,
-            count=len(flat))]
-        quick.sort(key=lambda q: -q[0])
+    # placements by construction (index -1: no RANSAC inliers) have slots of their own: two
+    # planar faces of other fragments, laid together, touch over as much as true mates do
+    laid = [(q, -1, coarse) for q, _, coarse in _quick_ranked(
+        source, target, flat, tree=tree, target_scene=target_scene, tol=tol, rtol=rtol, params=params,
+        count=len(flat))] if len(flat) else []
+    laid.sort(key=lambda q: -q[0])
     # different hypotheses often converge to one pose: keep distinct ones, so the
     # assembly gets real alternatives (up to twice as many refinements as candidates)
-    for _, i, coarse in quick[: params.refinements * params.candidates]:
-        refined = icp(source, target, coarse, tol=tol, normal_angle=params.normal_angle, tree=tree)
-        if _distinct(np.array([c.T_target_source for c in candidates] + [refined]), len(candidates) + 1,
-                     tol=rtol)[-1:] != [len(candidates)]:
-            continue
-        score, contact, pen = contact_score(source, target, refined, source_scene=source_scene,
-                                            target_scene=target_scene, tol=tol, params=params, gap=gap)
-        candidates.append(Candidate(refined, score, contact, pen, int(inliers[i]) if i >= 0 else 0))
-        if len(candidates) == params.candidates:
-            break
+    for ranked, slots in ((quick, params.candidates), (laid, params.plane_candidates)):
+        added = 0
+        for _, i, coarse in ranked[: params.refinements * slots]:
+            if added == slots:
+                break
+            refined = icp(source, target, coarse, tol=tol, normal_angle=params.normal_angle, tree=tree)
+            if _distinct(np.array([c.T_target_source for c in candidates] + [refined]), len(candidates) + 1,
+                         tol=rtol)[-1:] != [len(candidates)]:
+                continue
+            score, contact, pen = contact_score(source, target, refined, source_scene=source_scene,
+                                                target_scene=target_scene, tol=tol, params=params, gap=gap)
+            candidates.append(Candidate(refined, score, contact, pen, int(inliers[i]) if i >= 0 else 0))
+            added += 1
     candidates.sort(key=lambda c: -c.score)
     matches = np.zeros((0, 2), int)
     if candidates:

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ReassembleError
-from ..geometry import face_areas, make_scene, sample_surface
+from ..geometry import make_scene
 from ..repair import is_closed_solid
 from .kernels import (
     ball_moment_spectra,
@@ -291,9 +291,13 @@ def _distance_integrals(
     """
     from scipy.fft import rfftn
 
+    from .closest import MeshDistance
+
     bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
     D2 = np.full((len(points), len(radii)), np.nan)
-    area = face_areas(vertices, faces).sum()
+    t = time.perf_counter()
+    distance = MeshDistance(vertices, faces)  # one face adjacency for every radius
+    _add_time(timings, "distance", t)
     for i, r in enumerate(radii):
         h = r / params.d2_resolution
         # exact d^2 wherever the spline of the samples can reach inside the ball, then a
@@ -302,9 +306,7 @@ def _distance_integrals(
         grid = make_grid(bbox_min, bbox_max, h=h, margin=band + 2 * h)
         _check_grid(grid, params.max_memory, f"D2 at radius {r:g}")
         t = time.perf_counter()
-        count = int(min(4e6, 8 * area / h**2))
-        samples, _ = sample_surface(vertices, faces, count, rng=np.random.default_rng(0))
-        sq = squared_distance(scene, grid, r=exact, band=band, surface_points=np.vstack([vertices, samples]))
+        sq = squared_distance(distance, scene, grid, r=exact, band=band)
         _add_time(timings, "distance", t)
         t = time.perf_counter()
         spectrum = rfftn(sq, workers=-1)

@@ -362,52 +362,44 @@ def _distances(scene, grid: Grid, where: np.ndarray) -> np.ndarray:
     return scene.compute_distance(o3d.core.Tensor(pts)).numpy().astype(np.float64)
 
 
-def _distance_transform(grid: Grid, surface_points: np.ndarray) -> np.ndarray:
-    """Distance (voxel units) from each voxel to the nearest voxel holding a surface point."""
-    from scipy.ndimage import distance_transform_edt
+def _closest_faces(scene, grid: Grid, where: np.ndarray) -> np.ndarray:
+    """Index of a closest face to the voxels with flat indices ``where`` (Open3D, float32)."""
+    import open3d as o3d
 
-    empty = np.ones(grid.shape, bool)
-    idx = np.rint((surface_points - grid.origin) / grid.h).astype(np.int64)
-    idx = np.clip(idx, 0, np.array(grid.shape) - 1)
-    empty[idx[:, 0], idx[:, 1], idx[:, 2]] = False
-    return distance_transform_edt(empty)
+    ijk = np.column_stack(np.unravel_index(where, grid.shape))
+    pts = (grid.origin + grid.h * ijk).astype(np.float32)
+    return scene.compute_closest_points(o3d.core.Tensor(pts))["primitive_ids"].numpy().astype(np.int64)
 
 
-def squared_distance(
-    scene, grid: Grid, *, r: float, band: float, surface_points: np.ndarray
-) -> np.ndarray:
+def squared_distance(distance, scene, grid: Grid, *, r: float, band: float) -> np.ndarray:
     """Squared distance to the surface within ``r``, rolled off smoothly to a constant at ``band``.
 
-    Exact distances, the expensive part (Open3D's queries slow down with the distance
-    from the surface), are asked only where they matter: for voxels that may lie within
-    ``r`` (by a Euclidean distance transform of the voxels holding surface samples, plus
-    half a voxel diagonal and one voxel). In the roll-off, where only smoothness matters,
-    the distance is read from a cubic spline through exact distances on a grid twice as
-    coarse: an eighth of the queries. Returns the field minus its far value,
-    ``saturated_square(band)``, so float32 FFTs lose nothing to a large constant.
+    Parameters
+    ----------
+    distance : :class:`closest.MeshDistance` of the surface
+    scene : ray-casting scene of the same surface (:func:`geometry.make_scene`), for the few
+        voxels where closest-triangle propagation may stop short (:meth:`closest.MeshDistance.band`)
+    grid : Grid
+    r : radius within which the distances are exact; band : where the roll-off ends
+
+    Returns
+    -------
+    (nx, ny, nz) float32: :func:`saturated_square` of the distance minus its far value,
+    ``saturated_square(band)`` (so float32 FFTs lose nothing to a large constant): zero
+    beyond the band.
+
+    Notes
+    -----
+    Every voxel within ``band`` is computed (those beyond saturate to zero). Within ``r``
+    plus two voxels the distances are exact (measured on a sphere: without a voxel of
+    overlap, 2x the K2 noise), so the spline through the samples is exact wherever it
+    reaches into a ball of radius ``r`` about a surface point. Beyond, in the roll-off,
+    where only smoothness matters, they are the propagated ones (a distance to some
+    triangle: rarely, near medial surfaces, a little too long).
     """
-    from scipy.fft import irfftn, rfftn
-
-    from .kernels import bspline_eval, bspline_prefilter
-
-    edt = _distance_transform(grid, surface_points).ravel()
     far = float(saturated_square(np.array(band), r, band))
-    slack = 0.87  # half a voxel diagonal: the transform measures to voxel centres
-    near = np.flatnonzero(edt <= r / grid.h + slack + 1.0)  # measured: without this voxel of overlap, 2x the K2 noise
-    roll = np.flatnonzero((edt > r / grid.h + slack + 1.0) & (edt <= band / grid.h + slack))
-    out = np.zeros(grid.size, np.float64)
-    out[near] = saturated_square(_distances(scene, grid, near), r, band) - far
-    if len(roll):
-        # the rolled-off square itself is smooth, and zero beyond the band: no kink for the
-        # spline's prefilter to ring on
-        coarse = Grid(origin=grid.origin - grid.h, h=2 * grid.h,
-                      shape=tuple(int(n) // 2 + 3 for n in grid.shape))
-        c_edt = _distance_transform(coarse, surface_points).ravel()
-        c_where = np.flatnonzero(c_edt <= band / coarse.h + slack)  # beyond: exactly 0
-        gc = np.zeros(coarse.size, np.float64)
-        gc[c_where] = saturated_square(_distances(scene, coarse, c_where), r, band) - far
-        gc = gc.reshape(coarse.shape)
-        coeffs = irfftn(rfftn(gc) * bspline_prefilter(coarse.shape), s=coarse.shape)
-        ijk = np.column_stack(np.unravel_index(roll, grid.shape))
-        out[roll] = bspline_eval([coeffs], (ijk * grid.h + grid.origin - coarse.origin) / coarse.h)[:, 0]
-    return out.astype(np.float32).reshape(grid.shape)
+    where, dist2 = distance.band(grid.origin, grid.h, grid.shape, band, r + 2 * grid.h,
+                                 fallback=lambda idx: _closest_faces(scene, grid, idx))
+    out = np.zeros(grid.size, np.float32)
+    out[where] = saturated_square(np.sqrt(dist2), r, band) - far
+    return out.reshape(grid.shape)

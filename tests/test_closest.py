@@ -50,7 +50,9 @@ def shapes():
     yield "walls", u.vertices, u.faces
 
 
-@pytest.mark.parametrize("name,V,F", list(shapes()), ids=[s[0] for s in shapes()])
+# the brute force is the cost: the smooth shapes (10-13 s each) run with the slow tests
+@pytest.mark.parametrize("name,V,F", [pytest.param(*s, marks=pytest.mark.slow) if s[0] in ("sphere", "torus") else s
+                                      for s in shapes()], ids=[s[0] for s in shapes()])
 def test_band_equals_brute_force(name, V, F):
     V, F = np.asarray(V, float), np.asarray(F, np.int64)
     h = 0.05

@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from .features import FractureSurface
 from .geometry import farthest_points, invert_transform, make_scene, rotation_from_vector, transform_points
-from .registration import RegistrationParams, contact_score, touching_samples
+from .registration import RegistrationParams, contact_score, opposed_neighbours, touching_samples
 
 
 @dataclass(frozen=True)
@@ -384,9 +384,7 @@ def _normal_equations(pairs: list[tuple[int, int]], pts: list[np.ndarray], nrm: 
     rows = 0
     touching = []
     for p, q in pairs:
-        d, j = trees[q].query(pts[p], distance_upper_bound=distance)
-        ok = np.isfinite(d)
-        ok[ok] = np.einsum("ij,ij->i", nrm[p][ok], nrm[q][j[ok]]) < -cos_tol
+        ok, j = opposed_neighbours(trees[q], pts[p], nrm[p], nrm[q], reach=distance, cos_tol=cos_tol)
         if not ok.any():
             continue
         touching.append((p, q))

@@ -158,12 +158,12 @@ def plane_placements(
             if max(p.area, q.area) > area_ratio * min(p.area, q.area):
                 continue
             spacing = np.sqrt(max(p.area / len(p.flat), q.area / len(q.flat)))
+            frame_p = np.stack([p.axes[0], p.axes[1], p.normal], axis=1)
             for angle, shift in _in_plane(p.flat * [1.0, -1.0], q.flat, spacing=spacing, cells=cells, step=step,
                                           alternatives=alternatives):
                 c, s = np.cos(angle), np.sin(angle)
                 # a1 -> the turned first axis, a2 -> the mirrored, turned second one, n -> -n'
                 frame_q = np.stack([c * q.axes[0] + s * q.axes[1], s * q.axes[0] - c * q.axes[1], -q.normal], axis=1)
-                frame_p = np.stack([p.axes[0], p.axes[1], p.normal], axis=1)
                 R = frame_q @ frame_p.T
                 moved = q.centre + shift[0] * q.axes[0] + shift[1] * q.axes[1]
                 out.append(make_transform(R, moved - R @ p.centre))

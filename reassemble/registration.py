@@ -380,6 +380,29 @@ def _distinct(T: np.ndarray, count: int, *, tol: float) -> list[int]:
     return chosen
 
 
+def opposed_neighbours(tree, points: np.ndarray, normals: np.ndarray, target_normals: np.ndarray, *, reach: float,
+                       cos_tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points whose nearest target sample is within ``reach`` and faces them.
+
+    Parameters
+    ----------
+    tree : cKDTree of the target samples
+    points, normals : (k, 3) query points and their unit normals, in the target frame
+    target_normals : (t, 3) unit normals of the samples in ``tree``
+    reach : largest distance to the nearest sample
+    cos_tol : the normals must be opposed within this cosine (dot product below ``-cos_tol``)
+
+    Returns
+    -------
+    ok : (k,) bool, the points that have such a neighbour
+    nearest : (k,) int, the index of each point's nearest sample (``len`` of the tree where none)
+    """
+    d, j = tree.query(points, distance_upper_bound=reach)
+    ok = np.isfinite(d)
+    ok[ok] = np.einsum("ij,ij->i", normals[ok], target_normals[j[ok]]) < -cos_tol
+    return ok, j
+
+
 def icp(
     source: FractureSurface, target: FractureSurface, T: np.ndarray, *, tol: float, normal_angle: float = 30.0,
     iterations: int = 10, levels: tuple[float, ...] = (3.0, 2.0, 1.0), tree=None, n_points: int | None = None,
@@ -431,9 +454,7 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
         for _ in range(iterations):
             p = transform_points(T, src)
             n_src = src_n @ T[:3, :3].T
-            d, j = tree.query(p, distance_upper_bound=level * tol)
-            ok = np.isfinite(d)
-            ok[ok] = np.einsum("ij,ij->i", n_src[ok], target.sample_normals[j[ok]]) < -cos_tol
+            ok, j = opposed_neighbours(tree, p, n_src, target.sample_normals, reach=level * tol, cos_tol=cos_tol)
             if np.count_nonzero(ok) < (7 if max_gap > 0 else 6):
                 return T, gap
             n = target.sample_normals[j[ok]]
@@ -564,9 +585,8 @@ def contact_relief(
     cos_tol = np.cos(np.radians(normal_angle))
     q_all = target.samples + gap * target.sample_normals
     p = transform_points(T, source.samples)
-    d, j = cKDTree(q_all).query(p, distance_upper_bound=tol)
-    ok = np.isfinite(d)
-    ok[ok] = np.einsum("ij,ij->i", source.sample_normals[ok] @ T[:3, :3].T, target.sample_normals[j[ok]]) < -cos_tol
+    ok, j = opposed_neighbours(cKDTree(q_all), p, source.sample_normals @ T[:3, :3].T, target.sample_normals,
+                               reach=tol, cos_tol=cos_tol)
     q = target.samples[np.unique(j[ok])]
     if len(q) < 3:
         return 0.0
@@ -623,10 +643,8 @@ def _quick_ranked(source, target, T, *, tree, target_scene, tol: float, rtol: fl
         coarse = icp(source, target, T[i], tol=tol, normal_angle=params.normal_angle, iterations=params.quick_iterations,
                      levels=(params.quick_level,), tree=tree, n_points=n)
         p = transform_points(coarse, source.samples[:n])
-        d, j = tree.query(p, distance_upper_bound=params.quick_contact * tol)
-        ok = np.isfinite(d)
-        ok[ok] = np.einsum("ij,ij->i", source.sample_normals[:n][ok] @ coarse[:3, :3].T,
-                           target.sample_normals[j[ok]]) < -cos_tol
+        ok, _ = opposed_neighbours(tree, p, source.sample_normals[:n] @ coarse[:3, :3].T, target.sample_normals,
+                                   reach=params.quick_contact * tol, cos_tol=cos_tol)
         inside = _inside(target_scene, transform_points(coarse, source.surface[:m]), tol)
         # the same units as the full score: contact minus weighted penetration, as areas
         quick.append((ok.sum() * source.sample_area * len(source.samples) / n
@@ -728,5 +746,5 @@ def register_pair(
 
 __all__ = [
     "Candidate", "PairResult", "RegistrationParams", "contact_score", "correspondences", "estimate_gap", "frame_hypotheses", "contact_relief", "icp",
-    "kabsch", "ransac", "register_pair", "set_gap", "touching_samples", "with_noise",
+    "kabsch", "opposed_neighbours", "ransac", "register_pair", "set_gap", "touching_samples", "with_noise",
 ]

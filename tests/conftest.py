@@ -1,3 +1,4 @@
+import os
 import subprocess
 import sys
 
@@ -6,6 +7,14 @@ import pytest
 
 from reassemble.pipeline import break_to_folder, prepare_fragments, read_puzzle, run_to_folder
 from reassemble.synth import BreakParams
+
+
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto`` (pyproject.toml): one worker per usable core, at most four (each
+    end-to-end run holds a few hundred MB, and the session's shared runs are made once per
+    worker)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(4, cores))
 
 
 class Puzzles:

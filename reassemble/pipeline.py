@@ -52,9 +52,10 @@ class Result:
     T_world : (n, 4, 4) T_world_fragment per fragment (:func:`assembly.world_poses`)
     touching : per contact of the assembly, the touching points of either fragment
     timings : seconds per step
-    fallback : when the set was segmented again (``config.segment.fallback``): the method,
-        whether its assembly was kept, and both assemblies' whole-surface (contact,
-        penetration) areas over the reference size squared; else None
+    fallback : when the set was segmented again (planar mates, ``config.segment.fallback``):
+        the segmentation kept, whether it is not the first, and each tried assembly's
+        whole-surface (contact, penetration) areas over the reference size squared; else None
+    fallback_contact : that (contact, penetration) of this assembly, when compared
     """
 
     config: Config
@@ -66,6 +67,7 @@ class Result:
     touching: list | None = None
     timings: dict = dataclasses.field(default_factory=dict)
     fallback: dict | None = None
+    fallback_contact: list | None = None
 
 
 def reassemble(
@@ -77,8 +79,9 @@ def reassemble(
     ``assemble`` False stops after matching the pairs (what ``reassemble match`` writes).
     ``jobs`` > 1 describes fragments and registers pairs in that many processes; the
     result does not depend on it. When the assembly leaves fragments unplaced, the set is
-    segmented again with ``config.segment.fallback`` evidence and matched and assembled
-    again; the assembly with more whole-surface contact is kept (:mod:`arbiter`).
+    segmented again, with the planar mates of its break faces labelled too and then with
+    ``config.segment.fallback`` evidence, and matched and assembled again; the assembly
+    with most whole-surface contact is kept (:mod:`arbiter`).
     """
     config.check()
     t0 = time.perf_counter()
@@ -89,42 +92,70 @@ def reassemble(
     if not assemble:
         return result
     _assemble(result, progress=progress)
-    fallback = config.segment.fallback
-    # another segmentation can only help a fragment that was described and still not placed
-    waiting = [not p and f.descriptors is not None for p, f in zip(result.assembly.placed, result.fragments)]
-    if fallback in (None, config.segment.method) or not any(waiting) or thin_walled(result.fragments):
+    if thin_walled(result.fragments):
         return result
-    return _fallback(described, result, config, method=fallback, jobs=jobs, progress=progress)
+    t0, tried = time.perf_counter(), [result]
+    for retry in _retries(config):
+        # another segmentation can only help a fragment that was described and still not placed
+        if not any(not p and f.descriptors is not None for p, f in zip(result.assembly.placed, result.fragments)):
+            break
+        log.info("%d of %d fragments unplaced: segmenting with %s too",
+                 np.count_nonzero(~result.assembly.placed), len(result.fragments), _label(retry))
+        again = _match(described, retry, jobs=jobs, progress=progress, unless=tried)
+        if again is None:
+            continue
+        _assemble(again, progress=progress)
+        tried.append(again)
+        result = _better(result, again, config=config)
+    if result is not tried[0]:
+        # what config.json records: this segmentation, with no retries (--config reproduces the run)
+        segment = dataclasses.replace(result.config.segment, mates=bool(result.config.segment.mates), fallback=None)
+        result.config = dataclasses.replace(result.config, segment=segment)
+    if len(tried) > 1:
+        result.timings = {**tried[0].timings, "fallback": time.perf_counter() - t0}
+        result.fallback = {"method": _label(result.config), "kept": result is not tried[0],
+                           "contact": {_label(r.config): r.fallback_contact for r in tried}}
+    return result
 
 
-def _fallback(described: DescribedSet, first: Result, config: Config, *, method: str, jobs: int,
-              progress: bool) -> Result:
-    """Segment, match and assemble again with ``method`` evidence (``config`` as given, not
-    as resolved by the first try); keep the assembly with more whole-surface contact less
-    penetration (:mod:`arbiter`), ``first`` on a tie."""
-    t0 = time.perf_counter()
-    log.info("%d of %d fragments unplaced: segmenting with %s evidence too",
-             np.count_nonzero(~first.assembly.placed), len(first.fragments), method)
-    second = _match(described, dataclasses.replace(config, segment=dataclasses.replace(config.segment, method=method)),
-                    jobs=jobs, progress=progress)
-    _assemble(second, progress=progress)
-    # the same described meshes and size in both: one set of whole-surface samples; each
-    # assembly scored at the gap it was made with
+def _retries(config: Config) -> list[Config]:
+    """The segmentations a run tries when fragments stay unplaced, in order: the same
+    evidence with planar mates labelled (``segment.mates`` None), then ``segment.fallback``."""
+    out = []
+    if config.segment.mates is None:
+        out.append(dataclasses.replace(config, segment=dataclasses.replace(config.segment, mates=True)))
+    if config.segment.fallback not in (None, config.segment.method):
+        out.append(dataclasses.replace(config, segment=dataclasses.replace(config.segment,
+                                                                            method=config.segment.fallback)))
+    return out
+
+
+def _label(config: Config) -> str:
+    return config.segment.method + ("+mates" if config.segment.mates else "")
+
+
+def _better(first: Result, second: Result, *, config: Config) -> Result:
+    """The assembly with more whole-surface contact less penetration (:mod:`arbiter`),
+    ``first`` on a tie; both assemblies' (contact, penetration) areas over the size squared
+    are kept in ``fallback_contact``. The same described meshes and size in both: one set of
+    whole-surface samples; each assembly scored at the gap it was made with."""
     scores = arbiter.assembly_contact([first.assembly, second.assembly], [f.mesh for f in first.fragments],
                                       size=first.size, params=[first.config.registration, second.config.registration],
                                       seed=config.seed)
-    kept = second if arbiter.better(*scores, penetration_weight=config.registration.penetration_weight) else first
-    kept.timings = {**first.timings, "fallback": time.perf_counter() - t0}
-    kept.fallback = {"method": method, "kept": kept is second,
-                     "contact": {r.config.segment.method: [round(float(c) / r.size**2, 6) for c in score]
-                                 for r, score in zip((first, second), scores)}}
-    return kept
+    for r, score in zip((first, second), scores):
+        r.fallback_contact = [round(float(c) / r.size**2, 6) for c in score]
+    return second if arbiter.better(*scores, penetration_weight=config.registration.penetration_weight) else first
 
 
-def _match(described: DescribedSet, config: Config, *, jobs: int, progress: bool) -> Result:
-    """The segment, features and pairs steps on a described set."""
+def _match(described: DescribedSet, config: Config, *, jobs: int, progress: bool,
+           unless: list[Result] = ()) -> Result | None:
+    """The segment, features and pairs steps on a described set; None when the fracture
+    labels are those of a result in ``unless`` (matching them again would change nothing)."""
     t0 = time.perf_counter()
     frags, size = prepare_fragments({}, config=config, seed=config.seed, described=described)
+    if any(all(np.array_equal(a.segmentation.fracture, b.segmentation.fracture) for a, b in zip(frags, r.fragments)
+               if a.segmentation is not None and b.segmentation is not None) for r in unless):
+        return None
     registration = registration_params(frags, size=size, params=config.registration)
     t1 = time.perf_counter()
     pairs, registration = match_set(frags, size=size, params=registration, gap=config.gap, seed=config.seed,

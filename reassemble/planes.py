@@ -159,8 +159,8 @@ def plane_placements(
                 continue
             spacing = np.sqrt(max(p.area / len(p.flat), q.area / len(q.flat)))
             frame_p = np.stack([p.axes[0], p.axes[1], p.normal], axis=1)
-            for angle, shift in _in_plane(p.flat * [1.0, -1.0], q.flat, spacing=spacing, cells=cells, step=step,
-                                          alternatives=alternatives):
+            for angle, shift in in_plane_alignments(p.flat * [1.0, -1.0], q.flat, spacing=spacing, cells=cells,
+                                                    step=step, alternatives=alternatives):
                 c, s = np.cos(angle), np.sin(angle)
                 # a1 -> the turned first axis, a2 -> the mirrored, turned second one, n -> -n'
                 frame_q = np.stack([c * q.axes[0] + s * q.axes[1], s * q.axes[0] - c * q.axes[1], -q.normal], axis=1)
@@ -170,11 +170,14 @@ def plane_placements(
     return np.array(out).reshape(-1, 4, 4)
 
 
-def _in_plane(a: np.ndarray, b: np.ndarray, *, spacing: float, cells: int, step: float, alternatives: int):
+def in_plane_alignments(a: np.ndarray, b: np.ndarray, *, spacing: float, cells: int = 48, step: float = 3.0,
+                        alternatives: int = 2) -> list[tuple[float, np.ndarray]]:
     """[(angle, (2,) shift)]: the turns and shifts of points ``a`` (k, 2) whose occupancy
-    image overlaps ``b``'s most, best first: a coarse search over every turn, then each
-    kept turn refined within a step of it on images as fine as the samples allow (a cell
-    of 1.5 sample spacings, blurred: finer cells would be mostly empty)."""
+    image overlaps that of points ``b`` (m, 2) most, best first (``a @ [[c, s], [-s, c]] +
+    shift`` lies on ``b``): a coarse search over every turn in ``step`` degrees, then each
+    of ``alternatives`` turns (more than 20 degrees apart) refined within a step of it on
+    images as fine as the samples allow (a cell of 1.5 sample ``spacing``, blurred: finer
+    cells would be mostly empty)."""
     reach = max(np.abs(a).max(), np.abs(b).max())
     fine_cells = int(np.clip(2 * reach / (1.5 * spacing), cells, 8 * cells))
     coarse = _overlaps(a, b, np.radians(np.arange(0.0, 360.0, step)), reach=reach, cells=cells)
@@ -231,4 +234,4 @@ def _overlaps(a: np.ndarray, b: np.ndarray, angles: np.ndarray, *, reach: float,
     return out
 
 
-__all__ = ["PlanarPatch", "plane_placements", "planar_patches"]
+__all__ = ["PlanarPatch", "in_plane_alignments", "plane_placements", "planar_patches"]

@@ -19,7 +19,9 @@ from .descriptors import integral_invariants
 from .errors import ReassembleError
 from .features import empty_surface, fracture_surface
 from .geometry import denoise, face_areas, taubin_smooth, vertex_noise
+from .mates import relabel_planar_mates
 from .parallel import pool_map
+from .registration import with_noise
 from .segmentation import Segmentation, segment
 from .shells import is_thin_shell, strip_frames, strip_segmentation, wall_thickness
 
@@ -191,7 +193,26 @@ def segment_set(described: DescribedSet, thickness: dict[int, np.ndarray], *, co
                                       [described.descriptors[k] for k in good],
                                       size=described.size, params=config.segment, seed=seed)):
             segs[k] = s
+        if config.segment.mates and good:
+            segs = _with_mates(described, segs, good, config=config, seed=seed)
     return segs, bool(shell)
+
+
+def _with_mates(described: DescribedSet, segs: list, good: list[int], *, config: Config, seed: int) -> list:
+    """``segs`` with the planar mates of labelled planar break faces labelled fracture
+    (:func:`mates.relabel_planar_mates`), at the contact tolerance the registration will use."""
+    reg = with_noise(config.registration, noise=float(np.median([described.noise[k] for k in good])),
+                     size=described.size)
+    found = [segs[k] for k in good]
+    relabelled, changed = relabel_planar_mates(
+        [(described.matched[k], described.meshes[k][1]) for k in good], found, tol=reg.tolerance * described.size,
+        min_area=reg.plane_area * float(np.median([s.fracture_area for s in found])),
+        min_overlap=config.segment.mate_overlap, rng=np.random.default_rng(seed))
+    log.info("planar mates: %d fragment(s) relabelled", len(changed))
+    out = list(segs)
+    for k, s in zip(good, relabelled):
+        out[k] = s
+    return out
 
 
 def fracture_features(described: DescribedSet, segs: list, thickness: dict[int, np.ndarray], *, shell: bool,

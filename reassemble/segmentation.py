@@ -76,6 +76,13 @@ class SegmentParams:
     fallback : the method a run segments with again when its assembly leaves fragments
         unplaced; the assembly with more whole-surface contact is kept
         (:mod:`arbiter`). None: never
+    mates : also label fracture the planes of the surface labelled original that are the
+        best mates of labelled planar break faces (:mod:`mates`): True always, False never,
+        None (default) only when a run's assembly leaves fragments unplaced, before
+        ``fallback`` (a prismatic part's end face matches its cross-section as well as the
+        true mate does)
+    mate_overlap : the share of either outline on the other, laid together, that makes a
+        plane a mate (a clean break's two faces coincide)
 
     Notes
     -----
@@ -93,6 +100,8 @@ class SegmentParams:
     merge_angle: float = 45.0
     method: str = "learned"
     fallback: str | None = "mixture"
+    mates: bool | None = None
+    mate_overlap: float = 0.9
 
     def __post_init__(self):
         from .errors import ReassembleError

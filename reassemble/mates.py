@@ -1,0 +1,145 @@
+"""Planar break faces that the segmentation missed, found by their mates.
+
+A break is two faces, one on each fragment, of the same outline. When one side of a planar
+break is labelled fracture and the other is not, the unlabelled side is still there: a
+plane of the other fragment's surface, labelled original, whose outline coincides with the
+labelled face's once the two are laid together. Every break face has a mate, so a labelled
+planar face whose best mate in the whole set is such an unlabelled plane marks that plane
+as fracture. This is the complementarity cue of the segmentation (``docs/method/
+segmentation.md``); it needs no threshold on roughness, only the outline overlap that a
+clean break gives by construction.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .geometry import face_adjacency, face_areas, face_normals, sample_surface
+from .planes import PlanarPatch, in_plane_alignments, planar_patches
+from .segmentation import Segmentation, fracture_regions
+
+
+@dataclasses.dataclass(frozen=True)
+class _Plane:
+    fragment: int
+    labelled: bool  # labelled fracture (else: a plane of the surface labelled original)
+    patch: PlanarPatch
+
+
+def relabel_planar_mates(
+    meshes: list[tuple[np.ndarray, np.ndarray]], segmentations: list[Segmentation], *,
+    tol: float, min_area: float, min_overlap: float, samples: int = 20000, rng: np.random.Generator,
+) -> tuple[list[Segmentation], list[int]]:
+    """The segmentations with the planar mates of labelled planar break faces labelled fracture.
+
+    Parameters
+    ----------
+    meshes : (vertices (n, 3), faces (f, 3)) per fragment, as segmented
+    segmentations : Segmentation per fragment (not modified)
+    tol : largest distance of a point from its plane (mesh units: the contact tolerance)
+    min_area : planes with less area are not considered (mesh units squared)
+    min_overlap : the intersection over union of the two outlines, laid together, that
+        makes a plane a mate
+    samples : area-uniform surface samples per fragment
+    rng : numpy Generator
+
+    Returns
+    -------
+    segmentations : a new Segmentation where faces were relabelled, else the one given
+    relabelled : (k,) indices of the fragments that changed
+
+    Notes
+    -----
+    A labelled face's mate is the plane of another fragment, labelled or not, of similar
+    area whose outline overlaps it most (:func:`planes.in_plane_alignments`). Only when
+    that best mate is unlabelled, and overlaps by ``min_overlap``, are its faces labelled
+    fracture: a face whose labelled mate fits better is left as it is, and two planes of
+    the original surface (a plate's two sides) are never compared.
+    """
+    planes: list[_Plane] = []
+    sampled = []
+    for k, ((v, f), seg) in enumerate(zip(meshes, segmentations)):
+        points, face = sample_surface(v, f, samples, rng=rng)
+        normals = face_normals(v, f)[face]
+        sample_area = float(face_areas(v, f).sum()) / samples
+        sampled.append(sample_area)
+        for labelled in (True, False):
+            keep = seg.fracture[face] == labelled
+            if np.count_nonzero(keep) < 3:
+                continue
+            for p in planar_patches(points[keep], normals[keep], sample_area, tol=tol, min_area=min_area, rng=rng):
+                planes.append(_Plane(k, labelled, p))
+    best: dict[int, tuple[float, int]] = {}  # unlabelled plane -> (overlap, labelled plane)
+    for i, a in enumerate(planes):
+        if not a.labelled:
+            continue
+        mates = [(_outline_overlap(a.patch, b.patch, spacing=np.sqrt(max(sampled[a.fragment], sampled[b.fragment]))),
+                  j) for j, b in enumerate(planes) if b.fragment != a.fragment and _similar(a.patch, b.patch)]
+        if not mates:
+            continue
+        overlap, j = max(mates)
+        if not planes[j].labelled and overlap >= min_overlap and overlap > best.get(j, (0.0, -1))[0]:
+            best[j] = (overlap, i)
+    out, changed = list(segmentations), []
+    for j in sorted(best):
+        k, patch = planes[j].fragment, planes[j].patch
+        v, f = meshes[k]
+        seg = out[k]
+        on = _faces_on(v, f, patch, tol=tol, spacing=np.sqrt(sampled[k])) & ~seg.fracture
+        if not on.any():
+            continue
+        fracture = seg.fracture | on
+        area = face_areas(v, f)
+        out[k] = dataclasses.replace(seg, fracture=fracture, region=fracture_regions(fracture, face_adjacency(f)[0]),
+                                     fracture_area=float(area[fracture].sum()))
+        if k not in changed:
+            changed.append(k)
+    return out, sorted(changed)
+
+
+def _similar(p: PlanarPatch, q: PlanarPatch, ratio: float = 1.5) -> bool:
+    """Mates have the same area and second moments: within ``ratio`` (a cheap test before
+    the outlines)."""
+    return (max(p.area, q.area) <= ratio * min(p.area, q.area)
+            and bool(np.all(np.maximum(p.spread, q.spread) <= ratio * np.minimum(p.spread, q.spread))))
+
+
+def _outline_overlap(p: PlanarPatch, q: PlanarPatch, *, spacing: float) -> float:
+    """How far the two outlines coincide laid together (``p`` seen from the other side),
+    at the in-plane turn and shift that overlap them most: the smaller of the shares of
+    either's samples within two sample spacings of the other's (inside an outline every
+    sample has such a neighbour almost surely; only outline that is not shared counts)."""
+    from scipy.spatial import cKDTree
+
+    a = p.flat * [1.0, -1.0]
+    tree_a, tree_b = None, cKDTree(q.flat)
+    best = 0.0
+    for angle, shift in in_plane_alignments(a, q.flat, spacing=spacing):
+        c, s = np.cos(angle), np.sin(angle)
+        moved = a @ np.array([[c, s], [-s, c]]) + shift
+        tree_a = cKDTree(moved)
+        covered_a = np.mean(tree_b.query(moved, distance_upper_bound=2.0 * spacing)[0] < np.inf)
+        covered_b = np.mean(tree_a.query(q.flat, distance_upper_bound=2.0 * spacing)[0] < np.inf)
+        best = max(best, float(min(covered_a, covered_b)))
+    return best
+
+
+def _faces_on(vertices: np.ndarray, faces: np.ndarray, patch: PlanarPatch, *, tol: float, spacing: float,
+              normal_angle: float = 60.0) -> np.ndarray:
+    """(f,) bool: faces whose centre lies on the patch's plane within ``tol``, facing its
+    way within ``normal_angle``, inside its outline (cells of two sample spacings)."""
+    centres = vertices[faces].mean(axis=1)
+    rel = centres - patch.centre
+    near = (np.abs(rel @ patch.normal) < tol) & (face_normals(vertices, faces) @ patch.normal > np.cos(np.radians(normal_angle)))
+    cell = 2.0 * spacing
+    occupied = {tuple(x) for x in np.floor(patch.flat / cell).astype(np.int64)}
+    flat = np.floor(rel[near] @ patch.axes.T / cell).astype(np.int64)
+    inside = np.array([tuple(x) in occupied for x in flat], bool)
+    out = np.zeros(len(faces), bool)
+    out[np.flatnonzero(near)[inside]] = True
+    return out
+
+
+__all__ = ["relabel_planar_mates"]

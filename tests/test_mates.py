@@ -1,0 +1,76 @@
+"""Planar mates: a planar break face labelled original is found by its labelled mate."""
+
+import numpy as np
+import pytest
+
+from reassemble.geometry import face_areas, face_normals, random_rotation
+from reassemble.mates import relabel_planar_mates
+from reassemble.segmentation import Segmentation
+
+
+def _halves(rng):
+    """A dented sphere cut by a plane off its centre, each half moved to its own random pose:
+    [(vertices, faces, (f,) bool true cut faces)] per half."""
+    import manifold3d as m3d
+
+    ball = m3d.Manifold.sphere(1.0, 96) - m3d.Manifold.cube([0.6, 0.6, 0.6], True).translate([0.9, 0.0, 0.3])
+    out = []
+    for part in ball.split_by_plane([0.3, 0.2, 1.0], 0.25):
+        mesh = part.to_mesh()
+        v, f = np.asarray(mesh.vert_properties)[:, :3].astype(float), np.asarray(mesh.tri_verts).astype(np.int64)
+        n = np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0])
+        centres = v[f].mean(axis=1)
+        cut = (np.abs(centres @ n - 0.25) < 1e-6) & (np.abs(face_normals(v, f) @ n) > 0.999)
+        R = random_rotation(rng)
+        out.append((v @ R.T + rng.normal(size=3), f, cut))
+    return out
+
+
+def _segmentation(v, f, fracture):
+    area = face_areas(v, f)
+    return Segmentation(fracture.copy(), fracture.astype(float), np.zeros(len(f), int), np.where(fracture, 0, -1),
+                        float(area[fracture].sum()), float(area.sum()))
+
+
+@pytest.fixture(scope="module")
+def halves():
+    return _halves(np.random.default_rng(3))
+
+
+def test_the_missed_side_of_a_planar_break_is_labelled(halves):
+    (va, fa, cut_a), (vb, fb, cut_b) = halves
+    assert cut_a.any() and cut_b.any()
+    segs = [_segmentation(va, fa, cut_a), _segmentation(vb, fb, np.zeros(len(fb), bool))]  # b's face missed
+    given = [s.fracture.copy() for s in segs]
+    out, changed = relabel_planar_mates([(va, fa), (vb, fb)], segs, tol=0.005, min_area=0.1, min_overlap=0.9,
+                                        rng=np.random.default_rng(0))
+    assert changed == [1]
+    assert out[0] is segs[0] and all(np.array_equal(s.fracture, g) for s, g in zip(segs, given))  # not modified
+    area = face_areas(vb, fb)
+    found = out[1].fracture
+    assert area[found & cut_b].sum() > 0.98 * area[cut_b].sum()
+    assert area[found & ~cut_b].sum() < 0.01 * area[cut_b].sum()  # the dented sphere stays original
+    assert out[1].fracture_area == pytest.approx(area[found].sum()) and (out[1].region[found] >= 0).all()
+
+
+def test_a_set_whose_breaks_are_labelled_is_left_as_it_is(halves):
+    (va, fa, cut_a), (vb, fb, cut_b) = halves
+    segs = [_segmentation(va, fa, cut_a), _segmentation(vb, fb, cut_b)]
+    out, changed = relabel_planar_mates([(va, fa), (vb, fb)], segs, tol=0.005, min_area=0.1, min_overlap=0.9,
+                                        rng=np.random.default_rng(0))
+    assert changed == [] and all(o is s for o, s in zip(out, segs))
+
+
+def test_a_plane_that_does_not_match_the_outline_is_not_a_mate(halves):
+    """A prism's end face of about the break's area and second moments (a triangle beside
+    a disc), labelled original, is not its mate: the outlines differ."""
+    import manifold3d as m3d
+
+    (va, fa, cut_a), _ = halves
+    # the break: a disc of radius 0.97 less a dent; the triangle's circumradius 1.45
+    box = m3d.Manifold.cylinder(0.5, 1.45, 1.45, 3).to_mesh()
+    vb, fb = np.asarray(box.vert_properties)[:, :3].astype(float), np.asarray(box.tri_verts).astype(np.int64)
+    segs = [_segmentation(va, fa, cut_a), _segmentation(vb, fb, np.zeros(len(fb), bool))]
+    _, changed = relabel_planar_mates([(va, fa), (vb, fb)], segs, tol=0.005, min_area=0.1, min_overlap=0.9,
+                                      rng=np.random.default_rng(0))
+    assert changed == []

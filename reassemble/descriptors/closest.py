@@ -111,6 +111,33 @@ def _tri_closest(px, py, pz, T, t):
     return ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
 
 
+@njit(cache=True, inline="always")
+def _around(q, nx, ny, nz, cells, offset2):
+    """The voxels around voxel ``q`` (a flat index): itself and its 26 neighbours that are
+    in the grid, written to ``cells`` (flat indices) and ``offset2`` (squared offsets, in
+    voxels); returns how many."""
+    k = q % nz
+    j = (q // nz) % ny
+    i = q // (ny * nz)
+    n = 0
+    for di in range(-1, 2):
+        ii = i + di
+        if ii < 0 or ii >= nx:
+            continue
+        for dj in range(-1, 2):
+            jj = j + dj
+            if jj < 0 or jj >= ny:
+                continue
+            for dk in range(-1, 2):
+                kk = k + dk
+                if kk < 0 or kk >= nz:
+                    continue
+                cells[n] = (ii * ny + jj) * nz + kk
+                offset2[n] = di * di + dj * dj + dk * dk
+                n += 1
+    return n
+
+
 @njit(cache=True, parallel=True)
 def _suspects(where, T, tri, dist2, origin, h, nx, ny, nz, pos, exact2, spread):
     """Voxels within the exact zone whose closest point moves more than ``spread`` times as
@@ -129,30 +156,16 @@ def _suspects(where, T, tri, dist2, origin, h, nx, ny, nz, pos, exact2, spread):
     for s in prange(b):
         if dist2[s] > exact2:
             continue
-        q = where[s]
-        k = q % nz
-        j = (q // nz) % ny
-        i = q // (ny * nz)
-        for di in range(-1, 2):
-            ii = i + di
-            if ii < 0 or ii >= nx:
+        cells, offset2 = np.empty(27, np.int64), np.empty(27, np.int64)
+        for t in range(_around(where[s], nx, ny, nz, cells, offset2)):
+            o = pos[cells[t]]
+            if o < 0:
                 continue
-            for dj in range(-1, 2):
-                jj = j + dj
-                if jj < 0 or jj >= ny:
-                    continue
-                for dk in range(-1, 2):
-                    kk = k + dk
-                    if kk < 0 or kk >= nz:
-                        continue
-                    o = pos[(ii * ny + jj) * nz + kk]
-                    if o < 0:
-                        continue
-                    ex = foot[o, 0] - foot[s, 0]
-                    ey = foot[o, 1] - foot[s, 1]
-                    ez = foot[o, 2] - foot[s, 2]
-                    if ex * ex + ey * ey + ez * ez > s2 * h * h * (di * di + dj * dj + dk * dk):
-                        flag[s] = True
+            ex = foot[o, 0] - foot[s, 0]
+            ey = foot[o, 1] - foot[s, 1]
+            ez = foot[o, 2] - foot[s, 2]
+            if ex * ex + ey * ey + ez * ez > s2 * h * h * offset2[t]:
+                flag[s] = True
     return flag
 
 
@@ -170,28 +183,18 @@ def _relax(where, sel, T, nptr, nidx, tri, dist2, origin, h, nx, ny, nz, pos, ne
         px, py, pz = origin[0] + h * i, origin[1] + h * j, origin[2] + h * k
         bt = tri[s]
         best = dist2[s]
-        for di in range(-1, 2):
-            ii = i + di
-            if ii < 0 or ii >= nx:
+        cells, offset2 = np.empty(27, np.int64), np.empty(27, np.int64)
+        for t in range(_around(q, nx, ny, nz, cells, offset2)):
+            o = pos[cells[t]]
+            if o < 0:
                 continue
-            for dj in range(-1, 2):
-                jj = j + dj
-                if jj < 0 or jj >= ny:
-                    continue
-                for dk in range(-1, 2):
-                    kk = k + dk
-                    if kk < 0 or kk >= nz:
-                        continue
-                    o = pos[(ii * ny + jj) * nz + kk]
-                    if o < 0:
-                        continue
-                    g = tri[o]
-                    if g == bt:
-                        continue
-                    d = _tri_dist2(px, py, pz, T, g)
-                    if d < best:
-                        best = d
-                        bt = g
+            g = tri[o]
+            if g == bt:
+                continue
+            d = _tri_dist2(px, py, pz, T, g)
+            if d < best:
+                best = d
+                bt = g
         if bt != tri[s]:
             bt, best = _descend(px, py, pz, T, nptr, nidx, bt, best)
             changed += 1
@@ -204,26 +207,12 @@ def _relax(where, sel, T, nptr, nidx, tri, dist2, origin, h, nx, ny, nz, pos, ne
 def _dilate(sel, where, nx, ny, nz, pos):
     """The positions ``sel`` and their 26 neighbours' (that are in ``where``), ascending."""
     mark = np.zeros(len(where), np.bool_)
+    cells, offset2 = np.empty(27, np.int64), np.empty(27, np.int64)
     for u in range(len(sel)):
-        q = where[sel[u]]
-        k = q % nz
-        j = (q // nz) % ny
-        i = q // (ny * nz)
-        for di in range(-1, 2):
-            ii = i + di
-            if ii < 0 or ii >= nx:
-                continue
-            for dj in range(-1, 2):
-                jj = j + dj
-                if jj < 0 or jj >= ny:
-                    continue
-                for dk in range(-1, 2):
-                    kk = k + dk
-                    if kk < 0 or kk >= nz:
-                        continue
-                    o = pos[(ii * ny + jj) * nz + kk]
-                    if o >= 0:
-                        mark[o] = True
+        for t in range(_around(where[sel[u]], nx, ny, nz, cells, offset2)):
+            o = pos[cells[t]]
+            if o >= 0:
+                mark[o] = True
     return np.flatnonzero(mark)
 
 
@@ -392,29 +381,19 @@ def _solve_layer(front, L, T, nptr, nidx, origin, h, nx, ny, nz, layer, tri, dis
                 best = d
                 bt = g
         if not found:
-            for di in range(-1, 2):
-                ii = i + di
-                if ii < 0 or ii >= nx:
+            cells, offset2 = np.empty(27, np.int64), np.empty(27, np.int64)
+            for t in range(_around(q, nx, ny, nz, cells, offset2)):
+                r = cells[t]
+                lr = layer[r]
+                if offset2[t] < 2 or lr < 0 or lr >= L:
                     continue
-                for dj in range(-1, 2):
-                    jj = j + dj
-                    if jj < 0 or jj >= ny:
-                        continue
-                    for dk in range(-1, 2):
-                        kk = k + dk
-                        if kk < 0 or kk >= nz or di * di + dj * dj + dk * dk < 2:
-                            continue
-                        r = (ii * ny + jj) * nz + kk
-                        lr = layer[r]
-                        if lr < 0 or lr >= L:
-                            continue
-                        g = tri[r]
-                        if g == bt:
-                            continue
-                        d = _tri_dist2(px, py, pz, T, g)
-                        if d < best:
-                            best = d
-                            bt = g
+                g = tri[r]
+                if g == bt:
+                    continue
+                d = _tri_dist2(px, py, pz, T, g)
+                if d < best:
+                    best = d
+                    bt = g
         if best <= descend2:
             bt, best = _descend(px, py, pz, T, nptr, nidx, bt, best)
         tri[q] = bt
@@ -426,30 +405,17 @@ def _next_layer(front, L, nx, ny, nz, layer, dist2, limit2):
     """The unvisited neighbours of the voxels of ``front`` within the limit, marked layer L."""
     nxt = np.empty(min(26 * len(front), nx * ny * nz), np.int64)
     m = 0
+    cells, offset2 = np.empty(27, np.int64), np.empty(27, np.int64)
     for s in range(len(front)):
         q = front[s]
         if dist2[q] > limit2:
             continue
-        k = q % nz
-        j = (q // nz) % ny
-        i = q // (ny * nz)
-        for di in range(-1, 2):
-            ii = i + di
-            if ii < 0 or ii >= nx:
-                continue
-            for dj in range(-1, 2):
-                jj = j + dj
-                if jj < 0 or jj >= ny:
-                    continue
-                for dk in range(-1, 2):
-                    kk = k + dk
-                    if kk < 0 or kk >= nz:
-                        continue
-                    r = (ii * ny + jj) * nz + kk
-                    if layer[r] < 0:
-                        layer[r] = L
-                        nxt[m] = r
-                        m += 1
+        for t in range(_around(q, nx, ny, nz, cells, offset2)):
+            r = cells[t]
+            if layer[r] < 0:
+                layer[r] = L
+                nxt[m] = r
+                m += 1
     return nxt[:m].copy()
 
 

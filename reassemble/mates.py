@@ -59,12 +59,12 @@ def relabel_planar_mates(
     the original surface (a plate's two sides) are never compared.
     """
     planes: list[_Plane] = []
-    sampled = []
+    sample_areas = []
     for k, ((v, f), seg) in enumerate(zip(meshes, segmentations)):
         points, face = sample_surface(v, f, samples, rng=rng)
         normals = face_normals(v, f)[face]
         sample_area = float(face_areas(v, f).sum()) / samples
-        sampled.append(sample_area)
+        sample_areas.append(sample_area)
         for labelled in (True, False):
             keep = seg.fracture[face] == labelled
             if np.count_nonzero(keep) < 3:
@@ -75,7 +75,7 @@ def relabel_planar_mates(
     for i, a in enumerate(planes):
         if not a.labelled:
             continue
-        mates = [(_outline_overlap(a.patch, b.patch, spacing=np.sqrt(max(sampled[a.fragment], sampled[b.fragment]))),
+        mates = [(_outline_overlap(a.patch, b.patch, spacing=np.sqrt(max(sample_areas[a.fragment], sample_areas[b.fragment]))),
                   j) for j, b in enumerate(planes) if b.fragment != a.fragment and _similar(a.patch, b.patch)]
         if not mates:
             continue
@@ -87,7 +87,7 @@ def relabel_planar_mates(
         k, patch = planes[j].fragment, planes[j].patch
         v, f = meshes[k]
         seg = out[k]
-        on = _faces_on(v, f, patch, tol=tol, spacing=np.sqrt(sampled[k])) & ~seg.fracture
+        on = _faces_on(v, f, patch, tol=tol, spacing=np.sqrt(sample_areas[k])) & ~seg.fracture
         if not on.any():
             continue
         fracture = seg.fracture | on
@@ -114,7 +114,7 @@ def _outline_overlap(p: PlanarPatch, q: PlanarPatch, *, spacing: float) -> float
     from scipy.spatial import cKDTree
 
     a = p.flat * [1.0, -1.0]
-    tree_a, tree_b = None, cKDTree(q.flat)
+    tree_b = cKDTree(q.flat)
     best = 0.0
     for angle, shift in in_plane_alignments(a, q.flat, spacing=spacing):
         c, s = np.cos(angle), np.sin(angle)
@@ -134,9 +134,13 @@ def _faces_on(vertices: np.ndarray, faces: np.ndarray, patch: PlanarPatch, *, to
     rel = centres - patch.centre
     near = (np.abs(rel @ patch.normal) < tol) & (face_normals(vertices, faces) @ patch.normal > np.cos(np.radians(normal_angle)))
     cell = 2.0 * spacing
-    occupied = {tuple(x) for x in np.floor(patch.flat / cell).astype(np.int64)}
-    flat = np.floor(rel[near] @ patch.axes.T / cell).astype(np.int64)
-    inside = np.array([tuple(x) in occupied for x in flat], bool)
+    occupied = np.floor(patch.flat / cell).astype(np.int64)
+    lo = occupied.min(axis=0)
+    image = np.zeros(occupied.max(axis=0) - lo + 1, bool)
+    image[tuple((occupied - lo).T)] = True
+    at = np.floor(rel[near] @ patch.axes.T / cell).astype(np.int64) - lo
+    inside = np.all((at >= 0) & (at < image.shape), axis=1)
+    inside[inside] = image[tuple(at[inside].T)]
     out = np.zeros(len(faces), bool)
     out[np.flatnonzero(near)[inside]] = True
     return out

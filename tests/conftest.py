@@ -17,15 +17,6 @@ def pytest_xdist_auto_num_workers(config):
     return max(1, min(4, cores))
 
 
-def pytest_configure(config):
-    """With workers, one thread each for the libraries' own pools (BLAS, OpenMP in Open3D,
-    numba): set here, in the controller, before the workers start and inherit it. Threads
-    beside the workers only contend for the same cores."""
-    if config.getoption("numprocesses", None) and "PYTEST_XDIST_WORKER" not in os.environ:
-        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-            os.environ.setdefault(var, "1")
-
-
 class Puzzles:
     """Puzzles of bundled meshes and their ``reassemble run`` (seed 0), each made at most once
     per session, on first use; tests copy what they change. Several tests (and the smoke-set

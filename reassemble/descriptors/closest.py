@@ -112,6 +112,17 @@ def _tri_closest(px, py, pz, T, t):
 
 
 @njit(cache=True, inline="always")
+def _closer(px, py, pz, T, g, bt, best):
+    """(triangle, squared distance): ``g`` where it is closer to the point than ``best``
+    (that of triangle ``bt``), else ``bt``, ``best``."""
+    if g != bt:
+        d = _tri_dist2(px, py, pz, T, g)
+        if d < best:
+            return g, d
+    return bt, best
+
+
+@njit(cache=True, inline="always")
 def _around(q, nx, ny, nz, cells, offset2):
     """The voxels around voxel ``q`` (a flat index): itself and its 26 neighbours that are
     in the grid, written to ``cells`` (flat indices) and ``offset2`` (squared offsets, in
@@ -186,15 +197,8 @@ def _relax(where, sel, T, nptr, nidx, tri, dist2, origin, h, nx, ny, nz, pos, ne
         cells, offset2 = np.empty(27, np.int64), np.empty(27, np.int64)
         for t in range(_around(q, nx, ny, nz, cells, offset2)):
             o = pos[cells[t]]
-            if o < 0:
-                continue
-            g = tri[o]
-            if g == bt:
-                continue
-            d = _tri_dist2(px, py, pz, T, g)
-            if d < best:
-                best = d
-                bt = g
+            if o >= 0:
+                bt, best = _closer(px, py, pz, T, tri[o], bt, best)
         if bt != tri[s]:
             bt, best = _descend(px, py, pz, T, nptr, nidx, bt, best)
             changed += 1
@@ -373,27 +377,14 @@ def _solve_layer(front, L, T, nptr, nidx, origin, h, nx, ny, nz, layer, tri, dis
             if lr < 0 or lr >= L:
                 continue
             found = True
-            g = tri[r]
-            if g == bt:
-                continue
-            d = _tri_dist2(px, py, pz, T, g)
-            if d < best:
-                best = d
-                bt = g
+            bt, best = _closer(px, py, pz, T, tri[r], bt, best)
         if not found:
             cells, offset2 = np.empty(27, np.int64), np.empty(27, np.int64)
             for t in range(_around(q, nx, ny, nz, cells, offset2)):
                 r = cells[t]
                 lr = layer[r]
-                if offset2[t] < 2 or lr < 0 or lr >= L:
-                    continue
-                g = tri[r]
-                if g == bt:
-                    continue
-                d = _tri_dist2(px, py, pz, T, g)
-                if d < best:
-                    best = d
-                    bt = g
+                if offset2[t] >= 2 and 0 <= lr < L:
+                    bt, best = _closer(px, py, pz, T, tri[r], bt, best)
         if best <= descend2:
             bt, best = _descend(px, py, pz, T, nptr, nidx, bt, best)
         tri[q] = bt

@@ -10,6 +10,14 @@ from __future__ import annotations
 worker_state: dict = {}  # what a worker process holds between tasks (set by an initializer)
 
 
+def _start_worker(initializer, initargs) -> None:
+    from .allocator import retain_freed_memory
+
+    retain_freed_memory()  # as the command line does in the parent (a spawned process starts afresh)
+    if initializer is not None:
+        initializer(*initargs)
+
+
 def pool_map(fn, tasks, *, jobs: int, initializer=None, initargs=()):
     """``map(fn, tasks)`` in order, in ``jobs`` processes when jobs > 1 (spawned, not forked:
     the parent holds Open3D and FFT thread pools)."""
@@ -25,5 +33,5 @@ def pool_map(fn, tasks, *, jobs: int, initializer=None, initargs=()):
     from concurrent.futures import ProcessPoolExecutor
 
     with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context("spawn"),
-                             initializer=initializer, initargs=initargs) as pool:
+                             initializer=_start_worker, initargs=(initializer, initargs)) as pool:
         yield from pool.map(fn, tasks, chunksize=max(1, len(tasks) // (8 * jobs)))

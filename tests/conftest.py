@@ -5,8 +5,11 @@ import sys
 import numpy as np
 import pytest
 
+from reassemble.allocator import retain_freed_memory
 from reassemble.pipeline import break_to_folder, prepare_fragments, read_puzzle, run_to_folder
 from reassemble.synth import BreakParams
+
+retain_freed_memory()  # as `reassemble` does: the in-process runs of every worker fault their grids in once
 
 
 def pytest_xdist_auto_num_workers(config):
@@ -57,6 +60,34 @@ def puzzles(tmp_path_factory):
 COW = ("spot_low_resolution", 4, 1)  # the suite's puzzle (a smoke-set case too)
 SMALL_COW = ("spot_low_resolution", 2, 0)  # the smallest smoke-set case: two fragments
 TORUS3 = ("torus", 3, 0)  # a smoke-set case: three fragments, three pairs
+
+# Session fixtures are made once per xdist worker, and an end-to-end run is the suite's
+# costly part: the tests that share one run are sent to one worker (--dist loadgroup,
+# pyproject.toml), so it is made once. Tests that ask ``puzzles.run`` for a shared run
+# carry ``@shared_run(KEY)``; those that use the fixtures below are grouped on collection.
+def _group(key) -> str:
+    mesh, pieces, seed = key
+    return f"{mesh}_{pieces:02d}p_s{seed}"
+
+
+_FIXTURE_GROUPS = {"cli_run": _group(COW), "run_dir": _group(COW), "prepared": _group(COW) + "_prepared"}
+
+
+def shared_run(key) -> pytest.MarkDecorator:
+    """Mark a test that uses ``puzzles.run(*key)``: it runs on the worker that makes that run."""
+    return pytest.mark.xdist_group(_group(key))
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.get_closest_marker("xdist_group") is None:
+            group = next((g for name, g in _FIXTURE_GROUPS.items() if name in item.fixturenames), None)
+            if group:
+                item.add_marker(pytest.mark.xdist_group(group))
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        # the long tests first, the quick ones after, to fill in: the workers finish together
+        items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
 @pytest.fixture(scope="session")

@@ -14,7 +14,7 @@ from reassemble.files import read_transforms
 from reassemble.pipeline import break_to_folder, evaluate_files, read_puzzle, run_to_folder
 from reassemble.synth import BreakParams
 
-from .conftest import COW, SMALL_COW, tree_digest
+from .conftest import COW, SMALL_COW, shared_run, tree_digest
 
 
 def _score(run_dir, puzzle_dir) -> dict:
@@ -22,7 +22,8 @@ def _score(run_dir, puzzle_dir) -> dict:
     return report["alignments"]["anchor_largest"]["summary"]
 
 
-@pytest.mark.parametrize("spec", smoke_set(), ids=lambda s: s.name)
+@pytest.mark.parametrize("spec", [pytest.param(s, marks=shared_run((s.mesh, s.pieces, s.seed))) for s in smoke_set()],
+                         ids=lambda s: s.name)
 @pytest.mark.slow
 def test_run_solves_smoke_set(spec, puzzles, request):
     key = (spec.mesh, spec.pieces, spec.seed)
@@ -63,6 +64,7 @@ def test_run_outputs(run_dir, puzzle_dir):
 
 
 @pytest.mark.slow
+@shared_run(SMALL_COW)
 def test_run_recovers_a_moved_fragment(puzzles, tmp_path, rng):
     """Moving one input file by a known rigid motion moves its result by exactly the inverse."""
     import trimesh
@@ -202,6 +204,7 @@ def test_missing_fragment_others_still_right(puzzles, tmp_path):
 
 
 @pytest.mark.slow
+@shared_run(SMALL_COW)
 def test_units_do_not_matter(puzzles, tmp_path):
     """The same fragments in millimetres instead of metres: the same result, up to scale."""
     import trimesh

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from .conftest import tree_digest
+from .conftest import TORUS3, shared_run, tree_digest
 from .test_cli import assert_one_line_error, run
 
 
@@ -100,12 +100,11 @@ def test_unwritable_output(puzzle_dir, tmp_path):
 
 
 @pytest.mark.slow
+@shared_run(TORUS3)
 def test_killed_run_leaves_no_output_and_a_rerun_gives_the_same_files(puzzles, tmp_path):
     """A run of the 3-piece torus killed mid-way leaves nothing; run again, in two processes
     (--jobs 2), it writes what the smoke-set run of it (one process) wrote, byte for byte but
     for the timings: the result depends neither on the processes nor on an earlier run's leftovers."""
-    from .conftest import TORUS3
-
     puzzle_dir, run_dir = puzzles.puzzle(*TORUS3), puzzles.run(*TORUS3)
     before = _digests(puzzle_dir / "fragments")
     out = tmp_path / "out"

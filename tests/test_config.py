@@ -10,6 +10,8 @@ from reassemble.config import Config, default, from_dict, read_config, to_dict, 
 from reassemble.errors import ReassembleError
 from reassemble.synth import BreakParams
 
+from .conftest import SMALL_COW, shared_run
+
 
 def _parse(*argv):
     return cli.build_parser().parse_args([str(a) for a in argv])
@@ -100,9 +102,8 @@ def test_cli_unknown_setting_is_a_one_line_error(tmp_path, capsys):
 
 
 @pytest.mark.slow
+@shared_run(SMALL_COW)
 def test_config_json_reproduces_the_run(puzzles, tmp_path, capsys):
-    from .conftest import SMALL_COW
-
     puzzle_dir, run_dir = puzzles.puzzle(*SMALL_COW), puzzles.run(*SMALL_COW)  # a smoke-set case: shared
     written = json.loads((run_dir / "config.json").read_text())
     config = read_config(run_dir / "config.json")

@@ -18,6 +18,8 @@ import trimesh
 from reassemble.errors import ReassembleError
 from reassemble.files import load_mesh, mesh_warning, resolve_mesh_path
 
+from .conftest import SMALL_COW, shared_run
+
 RADII = (0.04, 0.08)  # fractions of the clean solid's diagonal
 TOLERANCE = 0.01  # of the ball's volume, for the mean error; see the module docstring
 
@@ -305,13 +307,12 @@ def _strict(transforms, puzzle_dir) -> float:
 
 
 @pytest.mark.slow
+@shared_run(SMALL_COW)
 @pytest.mark.parametrize("kind", ["cells", "soup"])
 def test_puzzle_of_bad_fragments_is_solved_as_well_as_the_clean_one(kind, puzzles, tmp_path):
     """The 2-piece cow, every fragment either cut into cells that keep their walls (as
     Breaking Bad ships its pieces) or turned into a soup with duplicate and flipped faces."""
     from reassemble.pipeline import read_puzzle, run_to_folder
-
-    from .conftest import SMALL_COW
 
     puzzle_dir, run_dir = puzzles.puzzle(*SMALL_COW), puzzles.run(*SMALL_COW)  # the clean run: a smoke-set case
     puzzle = read_puzzle(puzzle_dir / "ground_truth.json", with_labels=False)

@@ -630,12 +630,10 @@ def set_gap(
     -----
     Where material was lost, the mates are offset surfaces of each other: touching, they
     meet only in part and the residual is of the order of the gap; set apart by it, they
-    fit to the noise (torus 4 pieces, 1.5 % gap, with and without vertex noise: RMS
-    0.0022-0.0039 of the size touching, 0.0010-0.0021 apart). On a smooth, curved break
-    with vertex noise the gap and a motion along the normal are nearly the same unknown,
-    and the fit drifts to a gap that fits worse (torus 4 pieces, smooth, 0.1 % noise, no
-    gap: 0.0017 touching, 0.0020 at 3.5 % apart; every piece was then placed that far
-    from its mates).
+    fit to the noise. On a smooth, curved break with vertex noise the gap and a motion
+    along the normal are nearly the same unknown, and the fit can drift to a gap that fits
+    worse than touching (``python -m benchmarks.studies.gap_evidence`` gives both
+    residuals for puzzles with and without a gap).
 
     Parameters
     ----------

@@ -185,13 +185,24 @@ def posed_set(bench_set: BenchSet, *, config, seed: int):
     return dict(sorted(meshes.items())), truth, bbox_min, bbox_max
 
 
-def pipeline_solver(meshes: dict, *, config) -> dict:
-    """``run``'s pipeline (:func:`pipeline.reassemble`, one process): name -> transform, placed."""
+def pipeline_solver(meshes: dict, *, config) -> tuple[dict, dict]:
+    """``run``'s pipeline (:func:`pipeline.reassemble`, one process).
+
+    Returns
+    -------
+    predicted : name -> ``{"transform": (4, 4) T_world_fragment, "placed": bool}``
+    info : what ``report.json`` says of the run: its steps' seconds, the gap it used (a
+        fraction of the reference size), the most Taubin iterations a fragment was matched with
+    """
     from .pipeline import reassemble
 
     result = reassemble(meshes, config, jobs=1)
-    return {f.name: {"transform": result.T_world[k], "placed": bool(result.assembly.placed[k])}
-            for k, f in enumerate(result.fragments)}
+    predicted = {f.name: {"transform": result.T_world[k], "placed": bool(result.assembly.placed[k])}
+                 for k, f in enumerate(result.fragments)}
+    info = {"timings_s": {k: round(v, 3) for k, v in result.timings.items()},
+            "gap": round(float(result.config.registration.gap), 6),
+            "smoothing": int(max(f.smoothing for f in result.fragments))}
+    return predicted, info
 
 
 def _solve_and_score(bench_set: BenchSet, *, config, n_points: int, solver) -> dict:
@@ -202,7 +213,7 @@ def _solve_and_score(bench_set: BenchSet, *, config, n_points: int, solver) -> d
     t0 = time.perf_counter()
     meshes, truth, bbox_min, bbox_max = posed_set(bench_set, config=config, seed=seed)
     t1 = time.perf_counter()
-    predicted = (solver or pipeline_solver)(meshes, config=config)
+    predicted, info = (solver or pipeline_solver)(meshes, config=config)
     t2 = time.perf_counter()
     score = evaluate(truth, predicted, bbox_min=bbox_min, bbox_max=bbox_max, n_points=n_points, seed=config.seed)
     t3 = time.perf_counter()
@@ -210,7 +221,20 @@ def _solve_and_score(bench_set: BenchSet, *, config, n_points: int, solver) -> d
     return {"pieces": len(truth), "placed": score["n_placed"], "anchor": primary.get("anchor"),
             "metrics": {mode: a["summary"] for mode, a in score["alignments"].items()},
             "rotation_errors_deg": [round(f["rotation_error_deg"], 6) for f in primary["fragments"].values()],
-            "timings_s": {"load": round(t1 - t0, 3), "solve": round(t2 - t1, 3), "score": round(t3 - t2, 3)}}
+            "timings_s": {"load": round(t1 - t0, 3), "solve": round(t2 - t1, 3), "score": round(t3 - t2, 3)},
+            "solver": info, "peak_rss_mb": _peak_rss_mb()}
+
+
+def _peak_rss_mb() -> float | None:
+    """The most resident memory this process has held, MB (Linux, macOS)."""
+    try:
+        import resource
+        import sys
+
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        return round(peak / (2**20 if sys.platform == "darwin" else 2**10), 1)
+    except (ImportError, OSError):
+        return None
 
 
 def _child(conn, fn, kwargs) -> None:
@@ -296,8 +320,8 @@ def run_set(bench_set: BenchSet, *, config, n_points: int = 1000, timeout: float
     config : Config of the solve (``config.seed`` seeds the poses, with the set's id)
     n_points : surface points per piece for scoring
     timeout : seconds allowed for the set (None or 0: no limit)
-    solver : ``solver(meshes, *, config) -> {name: {"transform", "placed"}}``; default
-        :func:`pipeline_solver` (a module-level function: it is pickled to the workers)
+    solver : ``solver(meshes, *, config) -> (predicted, info)`` as :func:`pipeline_solver`
+        (a module-level function: it is pickled to the workers); default that one
     isolate : solve in a child process (killed at the timeout, or past the Dask worker's
         memory limit); False solves in this process (then a timeout cannot be enforced)
 
@@ -524,7 +548,7 @@ def _cluster(*, jobs: int, scheduler: str | None, memory_limit):
 
 def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, int] = (2, 20), limit: int | None = None,
           timeout: float | None = 600.0, jobs: int = 1, scheduler: str | None = None, memory_limit="auto",
-          n_points: int = 1000, solver=None, progress: bool = False) -> dict:
+          n_points: int = 1000, solver=None, only=None, progress: bool = False) -> dict:
     """Solve and score every selected set of ``dataset``; write ``out/results.jsonl``,
     ``summary.json``, ``summary.md`` and the plots.
 
@@ -540,6 +564,7 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
     memory_limit : per local worker, bytes or Dask's 'auto' (the RAM shared by the workers)
     n_points : surface points per piece for scoring
     solver : see :func:`run_set`
+    only : if given, the ids of the sets to consider (before ``pieces`` and ``limit``)
     progress : a progress bar with an ETA on stderr
 
     Returns
@@ -551,7 +576,8 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
 
     from .files import write_json
 
-    sets = select(discover(dataset), pieces=pieces, limit=limit, seed=config.seed)
+    sets = [s for s in discover(dataset) if only is None or s.id in only]
+    sets = select(sets, pieces=pieces, limit=limit, seed=config.seed)
     if not sets:
         raise ReassembleError(f"{dataset}: no fracture sets of {pieces[0]}-{pieces[1]} pieces (a set is a folder "
                               f"with two or more mesh files, or a puzzle with a ground_truth.json)")

@@ -166,7 +166,7 @@ def test_metrics_match_the_reference_code_on_20_predictions():
 
 def identity_solver(meshes, *, config):
     """Every piece left where it is given (wrong, but scored)."""
-    return {n: {"transform": np.eye(4), "placed": True} for n in meshes}
+    return {n: {"transform": np.eye(4), "placed": True} for n in meshes}, {}
 
 
 def failing_solver(meshes, *, config):

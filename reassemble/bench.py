@@ -458,7 +458,7 @@ def summary_markdown(summary: dict, *, title: str = "reassemble bench") -> str:
     """``summary.md``: the table a paper prints, and how it was scored."""
     lines = [f"# {title}", "", f"reassemble {summary['version']}. {summary['metrics']}", ""]
     lines += _table({"all": summary["overall"], **{f"{b} pieces": g for b, g in summary["by_pieces_bin"].items()}},
-                    "sets")
+                    "")
     if summary["by_category"]:
         lines += ["", "## By category", ""] + _table(summary["by_category"], "category")
     if summary["errors"]:
@@ -543,6 +543,8 @@ def _cluster(*, jobs: int, scheduler: str | None, memory_limit):
     import dask
     from distributed import Client, LocalCluster
 
+    if not log.isEnabledFor(logging.INFO):  # the scheduler of a local cluster logs in this process
+        logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler:
         return Client(scheduler), None
     with dask.config.set({"distributed.worker.daemon": False, "distributed.scheduler.allowed-failures": 1,

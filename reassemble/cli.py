@@ -554,10 +554,10 @@ def _add_bench(sub) -> None:
         "OUT/results.jsonl (one line per set, appended as they finish), summary.json, summary.md, "
         "pa_by_pieces.png and rotation_errors.png. Rerunning with the same options skips the sets already done.",
     )
-    p.add_argument("dataset", type=Path, help="folder tree of fracture sets")
+    p.add_argument("dataset", type=Path, metavar="DATASET", help="folder tree of fracture sets")
     p.add_argument("--out", type=Path, required=True, help="output folder (an existing one is resumed)")
     p.add_argument("--limit", type=_int_at_least(1), help="a seeded random sample of this many sets")
-    p.add_argument("--pieces", type=_pieces_range, default=defaults["pieces"].default,
+    p.add_argument("--pieces", type=_pieces_range, default=defaults["pieces"].default, metavar="LOW-HIGH",
                    help="sets with this many pieces, LOW-HIGH or N (default 2-20)")
     _option(p, "--seed", "seed", type=_int_at_least(0), help="random seed (poses, sample, solver)")
     p.add_argument("--timeout", type=_number, default=defaults["timeout"].default,

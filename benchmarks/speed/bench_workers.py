@@ -2,6 +2,7 @@
 
     python -m benchmarks.speed.bench_workers                    # 40 two-piece sets, 1 then 2 workers
     python -m benchmarks.speed.bench_workers --sets 8 --jobs 1  # a quick look
+    python -m benchmarks.speed.bench_workers --stand-in --jobs 1 --json /tmp/overhead.json  # no solving
 
 The sets: bundled meshes broken into 2 pieces (`reassemble break`, seeds 0 and 1), written in
 assembled pose as Breaking Bad stores them (`mesh/s<seed>/fractured_<k>/piece_*.ply`), each
@@ -29,6 +30,11 @@ import numpy as np
 from benchmarks.common import add_json_option, start, table
 
 MESHES = ("spot_low_resolution", "torus", "fish_low_resolution", "angle_block", "octagonal_pocket")
+
+
+def stand_in(meshes, *, config):
+    """No solving: every piece left where it is given (for the cost of the machinery alone)."""
+    return {n: {"transform": np.eye(4), "placed": True} for n in meshes}, {}
 
 
 def build(root: Path, *, sets: int) -> None:
@@ -67,6 +73,8 @@ def main() -> int:
                         help="where the sets are made (kept) and the runs written (replaced)")
     parser.add_argument("--setting", action="append", default=None, metavar="SECTION.NAME=VALUE",
                         help="configuration of the solves (default describe.resolution=5)")
+    parser.add_argument("--stand-in", action="store_true",
+                        help="do not solve (pieces left where given): the overhead alone")
     add_json_option(parser)
     args = parser.parse_args()
     run = start()
@@ -83,9 +91,13 @@ def main() -> int:
         shutil.rmtree(out, ignore_errors=True)
         load0 = os.getloadavg()[0]
         t0 = time.perf_counter()
-        bench(data, out, config=config, jobs=jobs, timeout=None, only=ids, progress=True)
+        # by its module's name, not __main__'s: the solving processes import it
+        from benchmarks.speed.bench_workers import stand_in as by_name
+
+        solver = by_name if args.stand_in else None
+        bench(data, out, config=config, jobs=jobs, timeout=None, only=ids, solver=solver, progress=True)
         wall = time.perf_counter() - t0
-        recs = list(read_results(out / "results.jsonl", key=options_key(config, n_points=1000)).values())
+        recs = list(read_results(out / "results.jsonl", key=options_key(config, n_points=1000, solver=solver)).values())
         ok = [r for r in recs if r["error"] is None]
         solve = float(np.mean([r["timings_s"]["solve"] for r in ok]))
         task = float(np.mean([r["time_s"] for r in ok]))
@@ -104,7 +116,8 @@ def main() -> int:
     speedup = rows[0]["wall_s"] / rows[-1]["wall_s"] if len(rows) > 1 else None
     if speedup is not None:
         print(f"{rows[-1]['workers']} workers vs {rows[0]['workers']}: {speedup:.2f}x faster")
-    tables = [table(f"`reassemble bench` on {len(ids)} two-piece sets (describe.resolution=5), LocalCluster; "
+    what = "not solved (--stand-in)" if args.stand_in else "describe.resolution=5"
+    tables = [table(f"`reassemble bench` on {len(ids)} two-piece sets ({what}), LocalCluster; "
                     "overhead per set = wall x workers / sets - mean solve",
                     ["workers", "sets", "failed", "wall s", "wall per set s", "task s", "solve s",
                      "overhead per set s", "in task s", "peak MB", "load at start"],
@@ -116,7 +129,8 @@ def main() -> int:
     if speedup is not None:
         headline.append((f"reassemble bench, {len(ids)} small sets: {rows[-1]['workers']} workers vs "
                          f"{rows[0]['workers']} on {os.cpu_count()} cores", f"{speedup:.2f}x"))
-    run.write(args.json, figures={"rows": rows, "speedup": speedup}, tables=tables, headline=headline)
+    run.write(args.json, figures={"rows": rows, "speedup": speedup, "stand_in": args.stand_in}, tables=tables,
+              headline=headline)
     return 0
 
 

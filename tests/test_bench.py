@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from reassemble.bench import BenchSet, bench, discover, options_key, run_set, select, summarize
+from reassemble.bench import BenchSet, bench, discover, options_key, read_results, run_set, select, summarize
 from reassemble.cli import main
 from reassemble.config import Config, with_setting
 from reassemble.files import write_ply
@@ -240,6 +240,13 @@ def test_bench_retries_the_set_of_a_killed_worker(tmp_path, monkeypatch):
     assert (tmp_path / "killed").exists()
     assert len(lines) == 3 and all(r["error"] is None for r in lines), lines
     assert summary["overall"]["failed"] == 0
+
+
+def test_a_line_cut_short_by_a_killed_client_is_ignored(tmp_path):
+    path = tmp_path / "results.jsonl"
+    path.write_text(json.dumps({"key": "k", "set": "a", "error": None}) + "\n"
+                    + json.dumps({"key": "other", "set": "b", "error": None}) + "\n" + '{"key": "k", "set": "c", "er')
+    assert list(read_results(path, key="k")) == ["a"]
 
 
 def test_options_key_changes_with_what_changes_results():

@@ -595,9 +595,9 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
     key = options_key(config, n_points=n_points, solver=solver)
     done = read_results(results, key=key)
 
-    def again(rec):  # a timeout under a shorter limit than this run's is worth another try
+    def again(rec):  # a set lost by the cluster, or over a shorter limit than this run's, is worth another try
         err = rec.get("error") or ""
-        return err.startswith("timeout") and (not timeout or rec.get("timeout", 0) < timeout)
+        return rec.get("lost", False) or (err.startswith("timeout") and (not timeout or rec.get("timeout", 0) < timeout))
 
     todo = [s for s in sets if s.id not in done or again(done[s.id])]
     todo.sort(key=lambda s: -s.pieces)  # the biggest first: no worker left alone with one at the end
@@ -616,8 +616,10 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
                     try:
                         rec = future.result()
                     except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the set failed, the run goes on
+                        # the cluster lost it (a worker died twice, or could not run the task): a rerun tries again
                         rec = {"set": s.id, "kind": s.kind, "category": s.category, "pieces": s.pieces,
-                               "seed": set_seed(config.seed, s.id), "error": _error_text(exc), "time_s": None}
+                               "seed": set_seed(config.seed, s.id), "error": _error_text(exc), "time_s": None,
+                               "lost": True}
                     rec = {"key": key, **rec, "timeout": timeout or 0}
                     _append(fh, rec)
                     done[s.id] = rec

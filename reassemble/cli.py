@@ -566,8 +566,8 @@ def _add_bench(sub) -> None:
     where.add_argument("--jobs", type=_int_at_least(0), default=0,
                        help="worker processes of the local Dask cluster (default 0: one per available core)")
     where.add_argument("--scheduler", metavar="ADDRESS",
-                       help="use the Dask cluster of this scheduler, e.g. tcp://host:8786 (workers need reassemble "
-                       "installed; start them with DASK_DISTRIBUTED__WORKER__DAEMON=False so they can enforce "
+                       help="use the Dask cluster of this scheduler, e.g. tcp://host:8786 (scheduler and workers need "
+                       "reassemble installed; start them with DASK_DISTRIBUTED__WORKER__DAEMON=False so they can enforce "
                        "--timeout)")
     p.add_argument("--memory-limit", type=_bytes, default=None,
                    help="memory per local worker, e.g. 4G (default: the RAM shared among the workers); a set "

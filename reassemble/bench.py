@@ -467,7 +467,7 @@ def summary_markdown(summary: dict, *, title: str = "reassemble bench") -> str:
 
 
 def _chart(title: str, labels: list[str], series: list[tuple[str, list[float], tuple]], *, ymax: float,
-           ylabel: str, size=(720, 420)):
+           ylabel: str, xlabel: str, size=(720, 440)):
     """A bar chart as a Pillow image: one group of bars per label, one bar per series."""
     from PIL import Image, ImageDraw
 
@@ -477,14 +477,15 @@ def _chart(title: str, labels: list[str], series: list[tuple[str, list[float], t
     img = Image.new("RGB", size, "white")
     d = ImageDraw.Draw(img)
     font = _font(14)
-    left, right, top, bottom = 60, 20, 40, 50
-    d.text((left, 10), title, fill="black", font=font)
+    left, right, top, bottom = 60, 20, 50, 70
+    d.text((left, 8), title, fill="black", font=font)
+    d.text((5, 28), ylabel, fill="gray", font=font)
+    d.text((w - right - 8 * len(xlabel), h - bottom + 24), xlabel, fill="gray", font=font)
     d.line([(left, top), (left, h - bottom), (w - right, h - bottom)], fill="black")
     for k in range(5):
         y = h - bottom - (h - bottom - top) * k / 4
         d.line([(left - 4, y), (left, y)], fill="black")
         d.text((5, y - 7), f"{ymax * k / 4:.3g}", fill="black", font=font)
-    d.text((5, top - 30 if top > 30 else 2), ylabel, fill="gray", font=font)
     slot = (w - left - right) / max(1, len(labels))
     bar = slot * 0.8 / max(1, len(series))
     for i, label in enumerate(labels):
@@ -512,14 +513,14 @@ def plots(summary: dict) -> dict:
     pa = _chart("Part accuracy by number of pieces", labels,
                 [("Breaking Bad PA", [counts[n]["part_acc"] for n in labels], (70, 110, 200)),
                  ("strict PA", [counts[n]["part_acc_strict"] for n in labels], (230, 140, 40))],
-                ymax=1.0, ylabel="share of pieces")
+                ymax=1.0, ylabel="share of pieces", xlabel="pieces in the set")
     hist = summary["rotation_histogram"]
     edges = hist["edges_deg"]
     bins = [f"{edges[k]:g}-{edges[k + 1]:g}" for k in range(len(edges) - 1)]
     top = max(hist["counts"] + [1])
     rot = _chart("Rotation error per piece (geodesic, degrees, largest piece anchored)", bins,
                  [("pieces", [float(c) for c in hist["counts"]], (70, 110, 200))], ymax=float(top),
-                 ylabel="pieces")
+                 ylabel="pieces", xlabel="degrees")
     return {"pa_by_pieces.png": pa, "rotation_errors.png": rot}
 
 

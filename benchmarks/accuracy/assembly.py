@@ -4,27 +4,31 @@
     python -m benchmarks.accuracy.assembly puzzles/bench --pieces 2,4,8 --seeds 0,1,2 --no-baseline --jobs 2
 
 The bench set is built first if missing (python -m data_synth.make_sets bench --out DIR).
-Per puzzle, `run_to_folder` (the code behind `reassemble run`, one process per puzzle)
-writes transforms.json, which is scored as `reassemble eval` does, with the prediction
-anchored on the largest placed fragment (our world frame is a fragment's file frame):
-strict part accuracy (mean chamfer < 1 % of the diagonal), Breaking Bad part accuracy,
-geodesic rotation RMSE, solved (every fragment strict-correct). The baseline is Open3D's
-tutorial FPFH + RANSAC + ICP on every pair glued by a maximum spanning tree
-(`reassemble.baseline.fpfh_assemble`, voxel 1/40 of the median fragment diagonal),
-scored the same way. Times are wall-clock of the whole run (loading to written files).
-Columns `gap` and `sm`: the separation of mating surfaces `run` used (fraction of the
-size; 0: touching) and the Taubin iterations of the copies it matched on (0: none).
+Our side runs through `reassemble bench` (reassemble.bench: each puzzle a task on a Dask
+LocalCluster of --jobs workers, solved by `run`'s pipeline in one process and scored as
+`reassemble eval` does), with the prediction anchored on the largest placed fragment (our
+world frame is a fragment's file frame): strict part accuracy (mean chamfer < 1 % of the
+diagonal), Breaking Bad part accuracy, geodesic rotation RMSE, solved (every fragment
+strict-correct). The baseline is Open3D's tutorial FPFH + RANSAC + ICP on every pair glued
+by a maximum spanning tree (`reassemble.baseline.fpfh_assemble`, voxel 1/40 of the median
+fragment diagonal), scored the same way. Times are wall-clock of a set's task (reading,
+solving and scoring; `run` also writes its files). Columns `gap` and `sm`: the separation
+of mating surfaces `run` used (fraction of the size; 0: touching) and the Taubin iterations
+of the copies it matched on (0: none). --out keeps bench's results.jsonl (a rerun resumes).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+
+from reassemble.bench import bench, options_key, read_results
 
 from benchmarks.common import (
     add_selection, add_setting_option, add_signature_radii, fpfh_baseline, match_config, select, start, table,
@@ -33,28 +37,24 @@ from benchmarks.common import (
 ALIGN = "anchor_largest"
 
 
-def run_puzzle(gt_path: str, baseline: bool, seed: int, signature_radii: int | None = None,
-               settings: tuple[str, ...] = ()) -> dict:
-    from reassemble.pipeline import evaluate_files, run_to_folder
+def ours(rec: dict) -> dict:
+    """A puzzle's line of `reassemble bench`'s results.jsonl as this benchmark's record."""
+    if rec["error"]:
+        print(f"{rec['set']}: {rec['error']}", flush=True)
+        zero = {"part_acc_strict": 0.0, "part_acc": 0.0, "rot_geodesic_rmse_deg": float("nan"), "solved": False}
+        return {"name": rec["set"], "fragments": rec["pieces"], "placed": 0, "time": rec["time_s"] or float("nan"),
+                "timings": {"prepare": float("nan"), "pairs": float("nan"), "assembly": float("nan")},
+                "gap": float("nan"), "smoothing": 0, "ours": zero, "rot_errors": [], "error": rec["error"]}
+    info = rec["solver"]
+    return {"name": rec["set"], "fragments": rec["pieces"], "placed": rec["placed"], "time": rec["time_s"],
+            "timings": info["timings_s"], "gap": info["gap"], "smoothing": info["smoothing"],
+            "ours": rec["metrics"][ALIGN], "rot_errors": rec["rotation_errors_deg"]}
 
-    gt_path = Path(gt_path)
-    with tempfile.TemporaryDirectory() as tmp:
-        t = time.perf_counter()
-        report = run_to_folder([gt_path.parent / "fragments"], Path(tmp) / "out", seed=seed,
-                               config=match_config(signature_radii, settings))
-        elapsed = time.perf_counter() - t
-        score = evaluate_files(Path(tmp) / "out" / "transforms.json", gt_path)
-    out = {"name": gt_path.parent.name, "fragments": report["summary"]["fragments"],
-           "placed": report["summary"]["placed"], "time": elapsed, "timings": report["summary"]["timings_s"],
-           "gap": report["summary"]["gap"],
-           "smoothing": max(f["smoothing_iterations"] for f in report["fragments"].values()),
-           "ours": score["alignments"][ALIGN]["summary"],
-           "rot_errors": [f["rotation_error_deg"] for f in score["alignments"][ALIGN]["fragments"].values()]}
-    if baseline:
-        base, out["base_time"] = fpfh_baseline(gt_path, seed=seed)
-        out["base"] = base["alignments"][ALIGN]["summary"]
-        out["base_rot_errors"] = [f["rotation_error_deg"] for f in base["alignments"][ALIGN]["fragments"].values()]
-    return out
+
+def baseline_puzzle(gt_path: str, seed: int) -> dict:
+    base, elapsed = fpfh_baseline(gt_path, seed=seed)
+    return {"base": base["alignments"][ALIGN]["summary"], "base_time": elapsed,
+            "base_rot_errors": [f["rotation_error_deg"] for f in base["alignments"][ALIGN]["fragments"].values()]}
 
 
 def report_puzzle(r: dict) -> None:
@@ -102,6 +102,8 @@ def main() -> int:
     parser.add_argument("--no-baseline", action="store_true")
     add_signature_radii(parser)
     add_setting_option(parser)
+    parser.add_argument("--out", type=Path, default=None,
+                        help="keep reassemble bench's results here (a rerun with the same options resumes)")
     parser.add_argument("--baseline-max-pieces", type=int, default=12,
                         help="run the baseline on puzzles of at most this many pieces (default 12: it takes "
                         "about 300 s on a 20-piece puzzle)")
@@ -116,13 +118,19 @@ def main() -> int:
           f"{'time s':>7s} (prep+pairs+asm) {'gap':>6s} {'sm':>3s} " + ("" if args.no_baseline else
                                               f"{'fpfh st':>7s} {'BB':>6s} {'rot':>7s} {'time':>7s}"))
     t0 = time.perf_counter()
-    results = []
+    config = dataclasses.replace(match_config(args.signature_radii, tuple(args.setting)), seed=args.seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = args.out or Path(tmp)
+        bench(args.root, out, config=config, pieces=(2, 10**6), timeout=None, jobs=args.jobs,
+              only={s.name for s in specs}, progress=True)
+        records = read_results(out / "results.jsonl", key=options_key(config, n_points=1000))
+    results = [ours(records[s.name]) for s in specs]
     with ProcessPoolExecutor(args.jobs) as pool:
-        baseline = [not args.no_baseline and s.pieces <= args.baseline_max_pieces for s in specs]
-        for r in pool.map(run_puzzle, paths, baseline, [args.seed] * len(paths), [args.signature_radii] * len(paths),
-                           [tuple(args.setting)] * len(paths)):
-            results.append(r)
-            report_puzzle(r)
+        todo = [k for k, s in enumerate(specs) if not args.no_baseline and s.pieces <= args.baseline_max_pieces]
+        for k, b in zip(todo, pool.map(baseline_puzzle, [paths[k] for k in todo], [args.seed] * len(todo))):
+            results[k].update(b)
+    for r in results:
+        report_puzzle(r)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}")
     groups: dict[str, list] = {"clean": [], "noisy": []}
     for spec, r in zip(specs, results):

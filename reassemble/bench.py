@@ -238,6 +238,9 @@ def _peak_rss_mb() -> float | None:
 
 
 def _child(conn, fn, kwargs) -> None:
+    from .allocator import retain_freed_memory
+
+    retain_freed_memory()  # as `reassemble run` does
     try:
         conn.send(("ok", fn(**kwargs)))
     except BaseException as exc:  # noqa: BLE001 - everything goes back to the parent as text
@@ -583,8 +586,6 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
     """
     from tqdm import tqdm
 
-    from .files import write_json
-
     sets = [s for s in discover(dataset) if only is None or s.id in only]
     sets = select(sets, pieces=pieces, limit=limit, seed=config.seed)
     if not sets:
@@ -604,42 +605,53 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
     todo.sort(key=lambda s: -s.pieces)  # the biggest first: no worker left alone with one at the end
     log.info("%d sets, %d already in %s, %d to run", len(sets), len(sets) - len(todo), results, len(todo))
     if todo:
-        from distributed import as_completed
-
         client, cluster = _cluster(jobs=jobs, scheduler=scheduler, memory_limit=memory_limit)
         try:
-            futures = {client.submit(run_set, s, config=config, n_points=n_points, timeout=timeout, solver=solver,
-                                     pure=False, retries=1, key=f"bench-{key}-{k}"): s for k, s in enumerate(todo)}
             with open(results, "a") as fh, tqdm(total=len(todo), unit="set", disable=not progress,
                                                  desc="bench") as bar:
-                for future in as_completed(futures):
-                    s = futures[future]
-                    try:
-                        rec = future.result()
-                    except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the set failed, the run goes on
-                        # the cluster lost it (a worker died twice, or could not run the task): a rerun tries again
-                        rec = {"set": s.id, "kind": s.kind, "category": s.category, "pieces": s.pieces,
-                               "seed": set_seed(config.seed, s.id), "error": _error_text(exc), "time_s": None,
-                               "lost": True}
-                    rec = {"key": key, **rec, "timeout": timeout or 0}
+                for rec in _solved(client, todo, key=key, config=config, n_points=n_points, timeout=timeout,
+                                   solver=solver):
                     _append(fh, rec)
-                    done[s.id] = rec
+                    done[rec["set"]] = rec
                     bar.update()
                     if rec["error"]:
-                        bar.write(f"{s.id}: {rec['error']}")
+                        bar.write(f"{rec['set']}: {rec['error']}")
         finally:
             client.close()
             if cluster is not None:
                 cluster.close()
-    records = [done[s.id] for s in sets if s.id in done]
-    summary = summarize(records)
+    summary = summarize([done[s.id] for s in sets if s.id in done])
     summary.update(dataset=str(dataset), key=key, ran=len(todo), skipped=len(sets) - len(todo),
                    options={"pieces": list(pieces), "limit": limit, "timeout": timeout or 0, "n_points": n_points,
                             "seed": config.seed})
+    _write_summary(out, summary)
+    return summary
+
+
+def _solved(client, todo: list[BenchSet], *, key: str, config, n_points: int, timeout, solver):
+    """Each set's results line as its task finishes (in any order); a set the cluster lost
+    is a line too, marked ``lost`` (a rerun tries it again)."""
+    from distributed import as_completed
+
+    futures = {client.submit(run_set, s, config=config, n_points=n_points, timeout=timeout, solver=solver,
+                             pure=False, retries=1, key=f"bench-{key}-{k}"): s for k, s in enumerate(todo)}
+    for future in as_completed(futures):
+        s = futures[future]
+        try:
+            rec = future.result()
+        except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker (a worker died twice): the run goes on
+            rec = {"set": s.id, "kind": s.kind, "category": s.category, "pieces": s.pieces,
+                   "seed": set_seed(config.seed, s.id), "error": _error_text(exc), "time_s": None, "lost": True}
+        yield {"key": key, **rec, "timeout": timeout or 0}
+
+
+def _write_summary(out: Path, summary: dict) -> None:
+    """``summary.json``, ``summary.md`` and the plots, each written aside and moved into place."""
+    from .files import write_json
+
     write_json(out / "summary.json", summary)
     (out / "summary.md.tmp").write_text(summary_markdown(summary))
     (out / "summary.md.tmp").replace(out / "summary.md")
     for name, img in plots(summary).items():
         img.save(out / f"{name}.tmp", format="PNG")
         (out / f"{name}.tmp").replace(out / name)
-    return summary

@@ -5,12 +5,12 @@ Notes
 Describing a fragment allocates and frees grids of tens to hundreds of MB again and
 again (one inverse FFT per kernel and radius). The GNU C library serves a request that
 large with a fresh ``mmap`` and returns it to the system on ``free``, so every grid is
-faulted in again page by page. On a virtual machine a page fault is expensive: measured
-on a 2-core Firecracker VM, a 3-piece run spent as long in the kernel as in Python
-(21 s user, 21 s system), three fifths of that system time in the faults of the inverse
-FFTs' outputs. Served from the heap and kept there, the pages are faulted in once: the
-same run took 10 s of system time and 22 % less wall time, with 6 % more peak memory
-(``benchmarks/speed/allocator.py``). The setting changes no result.
+faulted in again page by page. On a virtual machine a page fault is expensive: on a
+2-core Firecracker VM, three quarters of a run's page faults were in the inverse FFTs'
+outputs, and its system time was up to as long as its user time. Served from the heap
+and kept there, the pages are faulted in once: a 3- and a 4-piece run took 0.84-0.86 of
+the wall time, with half the system time or less and 4-7 % more peak memory
+(``python -m benchmarks.speed.allocator``). The setting changes no result.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .errors import ReassembleError
+from .errors import ReassembleError, first_line
 from .files import MESH_SUFFIXES
 
 log = logging.getLogger(__name__)
@@ -250,7 +250,7 @@ def _child(conn, fn, kwargs) -> None:
 
 
 def _error_text(exc: BaseException) -> str:
-    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    msg = first_line(exc)
     if isinstance(exc, ReassembleError):
         return msg
     where = traceback.extract_tb(exc.__traceback__)[-1:] if exc.__traceback__ else []

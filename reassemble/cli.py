@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
-from .errors import ReassembleError
+from .errors import ReassembleError, first_line
 
 log = logging.getLogger("reassemble")
 
@@ -603,7 +603,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # a bug: one line for users, the traceback with --debug
         if args.debug:
             raise
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        msg = first_line(exc)
         print(
             f"reassemble: internal error: {type(exc).__name__}: {msg} (rerun with --debug for details)",
             file=sys.stderr,

@@ -3,3 +3,9 @@
 
 class ReassembleError(Exception):
     """A problem with the user's input or options, reported as one line without a traceback."""
+
+
+def first_line(exc: BaseException) -> str:
+    """The first line of an exception's message ('' when it has none)."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else ""

@@ -21,7 +21,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from .errors import ReassembleError
+from .errors import ReassembleError, first_line
 from .geometry import is_rigid
 
 log = logging.getLogger(__name__)
@@ -153,7 +153,7 @@ def _read_triangles(path: Path) -> tuple[np.ndarray, np.ndarray]:
         vertices = np.asarray(loaded.vertices, dtype=np.float64)
         faces = np.asarray(loaded.faces, dtype=np.int64)
     except Exception as exc:  # trimesh raises many types for corrupt files
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        first = first_line(exc) or type(exc).__name__
         raise ReassembleError(f"{path}: cannot read mesh ({first})") from None
     if faces.ndim != 2 or len(faces) == 0 or len(vertices) < 3:
         raise ReassembleError(f"{path}: contains no triangles (a point cloud has no inside)")

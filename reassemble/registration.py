@@ -580,14 +580,8 @@ def contact_relief(
     of 0.1 % of the size read 0.08, the bound, at its true placement). The face normals of
     noisy samples vary, but not the positions: the relief is measured on those.
     """
-    from scipy.spatial import cKDTree
-
-    cos_tol = np.cos(np.radians(normal_angle))
-    q_all = target.samples + gap * target.sample_normals
-    p = transform_points(T, source.samples)
-    ok, j = opposed_neighbours(cKDTree(q_all), p, source.sample_normals @ T[:3, :3].T, target.sample_normals,
-                               reach=tol, cos_tol=cos_tol)
-    q = target.samples[np.unique(j[ok])]
+    _, j = _touching(source, target, T, tol=tol, gap=gap, normal_angle=normal_angle)
+    q = target.samples[np.unique(j)]
     if len(q) < 3:
         return 0.0
     centred = q - q.mean(axis=0)
@@ -601,16 +595,25 @@ def contact_rms(
     """The RMS of ``(p - q)·n - gap`` (mesh units) over the source samples within ``tol`` of
     ``gap`` from the target at ``T``, normals opposed (q, n the nearest target sample and its
     normal); inf with none."""
+    p, j = _touching(source, target, T, tol=tol, gap=gap, normal_angle=normal_angle)
+    if len(p) == 0:
+        return float("inf")
+    n = target.sample_normals[j]
+    r = np.einsum("ij,ij->i", p - (target.samples[j] + gap * n), n)
+    return float(np.sqrt(np.mean(r * r)))
+
+
+def _touching(source: FractureSurface, target: FractureSurface, T: np.ndarray, *, tol: float, gap: float,
+              normal_angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """(p (k, 3), j (k,)): the source samples placed by ``T`` that lie within ``tol`` of the
+    target moved out ``gap`` along its normals, normals opposed, and their nearest target samples."""
     from scipy.spatial import cKDTree
 
-    q_all = target.samples + gap * target.sample_normals
     p = transform_points(T, source.samples)
-    ok, j = opposed_neighbours(cKDTree(q_all), p, source.sample_normals @ T[:3, :3].T, target.sample_normals,
-                               reach=tol, cos_tol=np.cos(np.radians(normal_angle)))
-    if not ok.any():
-        return float("inf")
-    r = np.einsum("ij,ij->i", p[ok] - q_all[j[ok]], target.sample_normals[j[ok]])
-    return float(np.sqrt(np.mean(r * r)))
+    ok, j = opposed_neighbours(cKDTree(target.samples + gap * target.sample_normals), p,
+                               source.sample_normals @ T[:3, :3].T, target.sample_normals, reach=tol,
+                               cos_tol=np.cos(np.radians(normal_angle)))
+    return p[ok], j[ok]
 
 
 def set_gap(

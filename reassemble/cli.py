@@ -223,7 +223,7 @@ def _cmd_match(args: argparse.Namespace) -> int:
     from .pipeline import match_to_folder
 
     summary = match_to_folder(args.inputs, args.out, config=_config(args), force=args.force, debug=args.debug_files,
-                              jobs=_jobs(args), progress=not args.quiet)
+                              jobs=_jobs(args), scheduler=args.scheduler, progress=not args.quiet)
     print(f"{summary['fragments']} fragments, {summary['pairs']} pairs, {summary['touching']} touching:")
     for p in summary["pair_list"]:
         best = p["candidates"][0] if p["candidates"] else None
@@ -256,7 +256,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .pipeline import run_to_folder
 
     report = run_to_folder(args.inputs, args.out, config=_config(args), force=args.force, debug=args.debug_files,
-                           jobs=_jobs(args), progress=not args.quiet)
+                           jobs=_jobs(args), scheduler=args.scheduler, progress=not args.quiet)
     _print_run(report, args.out)
     if args.render or args.viewer:
         _view(args.out, render=args.render, viewer=args.viewer, progress=not args.quiet)
@@ -437,6 +437,10 @@ def _add_inputs(p) -> None:
             help="a file holding several separate bodies gives one fragment per body (stem.1, stem.2, "
             "...); by default a file is one rigid piece")
     _add_common(p)
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="describe fragments and register pairs on the Dask cluster of this scheduler, e.g. "
+                   "tcp://host:8786, instead of local processes (workers need reassemble installed; the result is "
+                   "the same)")
 
 
 def _add_run(sub) -> None:

@@ -57,12 +57,14 @@ def match_pairs(
     params=None,
     seed: int = 0,
     jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = False,
 ) -> dict[tuple[int, int], object]:
     """Register fragment pairs (all, or the given (source, target) index pairs): PairResult per pair.
 
     ``jobs`` > 1 registers pairs in that many processes; every pair has its own random
-    stream (spawned from ``seed`` in pair order), so results do not depend on ``jobs``.
+    stream (spawned from ``seed`` in pair order), so results do not depend on ``jobs``, nor
+    on ``scheduler`` (the address of a Dask cluster to register them on instead).
     ``params``: default :func:`registration_params` of the fragments (noise-aware tolerance).
     """
     params = params or registration_params(fragments, size=size)
@@ -72,7 +74,8 @@ def match_pairs(
     tasks = [(i, j, rng) for (i, j), rng in zip(pairs, rngs)]
     init = ([f.surface for f in fragments], [f.mesh for f in fragments], size, params)
     results = {}
-    for key, res in tqdm(pool_map(_pair_worker, tasks, jobs=jobs, initializer=_pair_worker_init, initargs=init),
+    for key, res in tqdm(pool_map(_pair_worker, tasks, jobs=jobs, scheduler=scheduler, initializer=_pair_worker_init,
+                                  initargs=init),
                          total=len(tasks), desc="pairs", disable=not progress):
         results[key] = res
     return results
@@ -80,7 +83,7 @@ def match_pairs(
 
 def match_set(
     fragments: list[PreparedFragment], *, size: float, params, gap: float | None = None, seed: int = 0,
-    jobs: int = 1, progress: bool = False,
+    jobs: int = 1, scheduler: str | None = None, progress: bool = False,
 ):
     """Register every pair, with the separation of mating surfaces measured or given.
 
@@ -96,13 +99,15 @@ def match_set(
     """
     if gap is not None:
         params = dataclasses.replace(params, gap=float(gap))
-    results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs, progress=progress)
+    results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs, scheduler=scheduler,
+                           progress=progress)
     if gap is None:
         measured = set_gap([f.surface for f in fragments], results, size=size, params=params)
         if measured > params.tolerance:
             log.info("mating surfaces are %.3g x size apart (material lost at the break?): matching again with "
                      "that gap", measured)
             params = dataclasses.replace(params, gap=measured)
-            results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs, progress=progress)
+            results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs,
+                                  scheduler=scheduler, progress=progress)
     return results, params
 

@@ -1,13 +1,19 @@
-"""The process pool of the describe and match-pairs stages.
+"""The worker processes of the describe and match-pairs stages: a local pool or a Dask cluster.
 
 A task function reads what every task shares (surfaces, meshes, options) from
 :data:`worker_state`, filled once per process by an initializer, instead of receiving it
-with every task.
+with every task. On a Dask cluster (``scheduler``) what the initializer needs is sent to
+every worker once and the initializer runs once per worker and stage; the tasks are the
+same, each with its own random stream, so the results are those of a local run.
 """
 
 from __future__ import annotations
 
+import threading
+
 worker_state: dict = {}  # what a worker process holds between tasks (set by an initializer)
+_state_lock = threading.Lock()  # a Dask worker may run several tasks at once, in threads
+_clients: dict = {}  # scheduler address -> Dask client, one per process
 
 
 def _start_worker(initializer, initargs) -> None:
@@ -18,9 +24,13 @@ def _start_worker(initializer, initargs) -> None:
         initializer(*initargs)
 
 
-def pool_map(fn, tasks, *, jobs: int, initializer=None, initargs=()):
-    """``map(fn, tasks)`` in order, in ``jobs`` processes when jobs > 1 (spawned, not forked:
-    the parent holds Open3D and FFT thread pools)."""
+def pool_map(fn, tasks, *, jobs: int, initializer=None, initargs=(), scheduler: str | None = None):
+    """``map(fn, tasks)`` in order: in this process, in ``jobs`` local processes when
+    jobs > 1 (spawned, not forked: the parent holds Open3D and FFT thread pools), or on the
+    Dask cluster of ``scheduler`` (``tcp://host:8786``) when given."""
+    if scheduler:
+        yield from _cluster_map(fn, tasks, scheduler=scheduler, initializer=initializer, initargs=initargs)
+        return
     if jobs <= 1 or len(tasks) <= 1:
         if initializer is not None:
             initializer(*initargs)
@@ -35,3 +45,47 @@ def pool_map(fn, tasks, *, jobs: int, initializer=None, initargs=()):
     with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context("spawn"),
                              initializer=_start_worker, initargs=(initializer, initargs)) as pool:
         yield from pool.map(fn, tasks, chunksize=max(1, len(tasks) // (8 * jobs)))
+
+
+def client(scheduler: str):
+    """The Dask client of this process for the cluster at ``scheduler`` (made once, kept)."""
+    if scheduler not in _clients:
+        from distributed import Client
+
+        from .errors import ReassembleError, first_line
+
+        try:
+            _clients[scheduler] = Client(scheduler, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ReassembleError(f"cannot reach the Dask scheduler at {scheduler}: {first_line(exc)}") from None
+    return _clients[scheduler]
+
+
+def _cluster_map(fn, tasks, *, scheduler: str, initializer, initargs):
+    """:func:`pool_map` on a Dask cluster: the shared arguments scattered to every worker
+    once, a task per item, the results in order."""
+    import uuid
+
+    c = client(scheduler)
+    token = uuid.uuid4().hex  # this stage's shared state, told apart from an earlier stage's
+    shared = c.scatter(list(initargs), broadcast=True, hash=False) if initializer is not None else []
+    futures = [c.submit(_cluster_task, fn, task, initializer, shared, token, pure=False, key=f"{fn.__name__}-{token}-{k}")
+               for k, task in enumerate(tasks)]
+    try:
+        for future in futures:
+            yield future.result()
+    finally:
+        c.cancel(futures + shared)
+
+
+def _cluster_task(fn, task, initializer, shared, token):
+    with _state_lock:  # stages come one after another; within one the tasks only read the state
+        if worker_state.get("_token") != token:
+            if "_token" not in worker_state:
+                from .allocator import retain_freed_memory
+
+                retain_freed_memory()
+            if initializer is not None:
+                initializer(*shared)
+            worker_state["_token"] = token
+    return fn(task)

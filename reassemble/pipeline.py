@@ -72,22 +72,23 @@ class Result:
 
 def reassemble(
     meshes: dict[str, tuple[np.ndarray, np.ndarray]], config: Config = Config(), *, assemble: bool = True,
-    jobs: int = 1, progress: bool = False,
+    jobs: int = 1, scheduler: str | None = None, progress: bool = False,
 ) -> Result:
     """Reassemble fragments given as name -> (vertices (n, 3), faces (f, 3)), in memory.
 
     ``assemble`` False stops after matching the pairs (what ``reassemble match`` writes).
     ``jobs`` > 1 describes fragments and registers pairs in that many processes; the
-    result does not depend on it. When the assembly leaves fragments unplaced, the set is
+    result does not depend on it, nor on ``scheduler`` (the address of a Dask cluster to do
+    that work on instead). When the assembly leaves fragments unplaced, the set is
     segmented again, with the planar mates of its break faces labelled too and then with
     ``config.segment.fallback`` evidence, and matched and assembled again; the assembly
     with most whole-surface contact is kept (:mod:`arbiter`).
     """
     config.check()
     t0 = time.perf_counter()
-    described = describe_fragments(meshes, config=config, jobs=jobs, progress=progress)
+    described = describe_fragments(meshes, config=config, jobs=jobs, scheduler=scheduler, progress=progress)
     describing = time.perf_counter() - t0
-    result = _match(described, config, jobs=jobs, progress=progress)
+    result = _match(described, config, jobs=jobs, scheduler=scheduler, progress=progress)
     result.timings["prepare"] += describing
     if not assemble:
         return result
@@ -101,7 +102,7 @@ def reassemble(
             break
         log.info("%d of %d fragments unplaced: segmenting with %s too",
                  np.count_nonzero(~result.assembly.placed), len(result.fragments), _label(retry))
-        again = _match(described, retry, jobs=jobs, progress=progress, unless=tried)
+        again = _match(described, retry, jobs=jobs, scheduler=scheduler, progress=progress, unless=tried)
         if again is None:
             continue
         _assemble(again, progress=progress)
@@ -147,7 +148,7 @@ def _better(first: Result, second: Result, *, config: Config) -> Result:
     return second if arbiter.better(*scores, penetration_weight=config.registration.penetration_weight) else first
 
 
-def _match(described: DescribedSet, config: Config, *, jobs: int, progress: bool,
+def _match(described: DescribedSet, config: Config, *, jobs: int, scheduler: str | None, progress: bool,
            unless: list[Result] = ()) -> Result | None:
     """The segment, features and pairs steps on a described set; None when the fracture
     labels are those of a result in ``unless`` (matching them again would change nothing)."""
@@ -159,7 +160,7 @@ def _match(described: DescribedSet, config: Config, *, jobs: int, progress: bool
     registration = registration_params(frags, size=size, params=config.registration)
     t1 = time.perf_counter()
     pairs, registration = match_set(frags, size=size, params=registration, gap=config.gap, seed=config.seed,
-                                    jobs=jobs, progress=progress)
+                                    jobs=jobs, scheduler=scheduler, progress=progress)
     resolved = dataclasses.replace(config, thin_walls=thin_walled(frags), gap=registration.gap,
                                    registration=registration)
     return Result(resolved, frags, size, pairs, timings={"prepare": t1 - t0, "pairs": time.perf_counter() - t1})
@@ -194,7 +195,8 @@ def _load(inputs, out, *, config: Config, seed: int | None, force: bool):
 
 def match_to_folder(
     inputs: list[str | Path], out: str | Path, *, config: Config = Config(), seed: int | None = None,
-    force: bool = False, debug: bool = False, jobs: int = 1, progress: bool = False,
+    force: bool = False, debug: bool = False, jobs: int = 1, scheduler: str | None = None,
+    progress: bool = False,
 ) -> dict:
     """Segment the fragments, register every pair, and write ``pairs.json`` (+ debug files).
 
@@ -206,7 +208,7 @@ def match_to_folder(
     the best candidate, each in its own fragment's frame). ``seed``: instead of ``config.seed``.
     """
     meshes, warnings, config, _ = _load(inputs, out, config=config, seed=seed, force=force)
-    result = reassemble(meshes, config, assemble=False, jobs=jobs, progress=progress)
+    result = reassemble(meshes, config, assemble=False, jobs=jobs, scheduler=scheduler, progress=progress)
     write_match_folder(out, result, warnings=warnings, force=force, debug=debug)
     pairs = pairs_json(result.fragments, result.pairs)
     return {"fragments": len(result.fragments), "pairs": len(pairs), "touching": sum(p["touching"] for p in pairs),
@@ -215,7 +217,8 @@ def match_to_folder(
 
 def run_to_folder(
     inputs: list[str | Path], out: str | Path, *, config: Config = Config(), seed: int | None = None,
-    force: bool = False, debug: bool = False, jobs: int = 1, progress: bool = False,
+    force: bool = False, debug: bool = False, jobs: int = 1, scheduler: str | None = None,
+    progress: bool = False,
 ) -> dict:
     """The main job: fragments in, the assembled object and its report out.
 
@@ -232,7 +235,7 @@ def run_to_folder(
     Returns the report (a dict).
     """
     meshes, warnings, config, seconds = _load(inputs, out, config=config, seed=seed, force=force)
-    result = reassemble(meshes, config, jobs=jobs, progress=progress)
+    result = reassemble(meshes, config, jobs=jobs, scheduler=scheduler, progress=progress)
     result.timings["prepare"] += seconds  # reading the files counts as preparing them
     report = run_report(result, warnings=warnings)
     write_run_folder(out, result, report=report, force=force, debug=debug)

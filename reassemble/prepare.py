@@ -114,12 +114,13 @@ def describe_fragments(
     *,
     config: Config = Config(),
     jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = False,
 ) -> DescribedSet:
     """Vertex noise, the copies to match on and the descriptors at their face centres.
 
-    ``jobs`` > 1 computes the descriptors of that many fragments at once, in processes.
-    Raises ReassembleError when no fragment can be described.
+    ``jobs`` > 1 computes the descriptors of that many fragments at once, in processes;
+    ``scheduler``, on the Dask cluster at that address. Raises ReassembleError when no fragment can be described.
     """
     names = sorted(meshes)
     pairs = [meshes[n] for n in names]
@@ -135,7 +136,7 @@ def describe_fragments(
                  float(np.median(noise)) / size, config.denoise, smoothing)
     tasks = [(v, f, radii, params, config.radii[-1]) for v, (_, f) in zip(matched, pairs)]
     descriptors, notes = [], {}
-    for name, (d, note) in zip(names, tqdm(pool_map(_describe, tasks, jobs=jobs), total=len(tasks),
+    for name, (d, note) in zip(names, tqdm(pool_map(_describe, tasks, jobs=jobs, scheduler=scheduler), total=len(tasks),
                                            desc="descriptors", disable=not progress)):
         descriptors.append(d)
         if note:

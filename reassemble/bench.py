@@ -238,9 +238,17 @@ def _peak_rss_mb() -> float | None:
 
 
 def _child(conn, fn, kwargs) -> None:
+    import threading
+
+    from tqdm import tqdm
+
     from .allocator import retain_freed_memory
 
     retain_freed_memory()  # as `reassemble run` does
+    # tqdm's default lock is a named POSIX semaphore, registered with multiprocessing's resource
+    # tracker; a child killed at its timeout never unlinks it, and the tracker warns of a "leaked
+    # semaphore" when the run ends. No other process draws this one's bars: a thread lock will do.
+    tqdm.set_lock(threading.RLock())
     try:
         conn.send(("ok", fn(**kwargs)))
     except BaseException as exc:  # noqa: BLE001 - everything goes back to the parent as text
@@ -305,6 +313,9 @@ def _in_child(fn, kwargs: dict, *, timeout: float | None, memory_limit: float | 
         except EOFError:
             proc.join(5)
             raise _Stopped(f"crashed (the solving process ended with exit code {proc.exitcode})") from None
+        # let it end by itself: killed now, while it runs its exit handlers, it would leave what
+        # they release (semaphores, temporary files) to the resource tracker, which warns of leaks
+        proc.join(5)
     finally:
         if proc.is_alive():
             proc.kill()
@@ -551,10 +562,13 @@ def _cluster(*, jobs: int, scheduler: str | None, memory_limit):
         logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler:
         return Client(scheduler), None
+    # the scheduler serves HTTP even without its dashboard, on 8787 by default: a port another cluster
+    # on the machine may hold (then Dask warns and takes another); ":0" takes a free one at once
     with dask.config.set({"distributed.worker.daemon": False, "distributed.scheduler.allowed-failures": 1,
                           "distributed.worker.memory.target": False, "distributed.worker.memory.spill": False}):
         cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address=":0", scheduler_kwargs={"dashboard": False},
+                               silence_logs=logging.ERROR)
         return Client(cluster), cluster
 
 

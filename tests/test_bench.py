@@ -190,6 +190,34 @@ def killing_solver(meshes, *, config):
     return identity_solver(meshes, config=config)
 
 
+def tqdm_then_sleep(seconds):
+    """What a solve does: a progress bar (tqdm's lock is a POSIX semaphore), then work."""
+    from tqdm import tqdm
+
+    for _ in tqdm(range(3), disable=True):
+        pass
+    time.sleep(seconds)
+    return {}
+
+
+def test_the_solving_processes_leak_no_semaphore(tmp_path):
+    """A child that answers and one killed at its timeout: no "leaked semaphore" warning from
+    multiprocessing's resource tracker when the parent ends."""
+    script = ("from reassemble.bench import _in_child, _Stopped\n"
+              "from tests.test_bench import tqdm_then_sleep\n"
+              "print(_in_child(tqdm_then_sleep, {'seconds': 0}, timeout=None, memory_limit=None))\n"
+              "try:\n    _in_child(tqdm_then_sleep, {'seconds': 30}, timeout=1, memory_limit=None)\n"
+              "except _Stopped as exc:\n    print(exc)\n")
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
+                          cwd=os.path.dirname(os.path.dirname(__file__)))
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == ["{}", "timeout (1 s)"]
+    assert "leaked" not in done.stderr and "resource_tracker" not in done.stderr, done.stderr
+
+
 def test_run_set_records_errors_instead_of_raising(tmp_path):
     bad = tmp_path / "bad"
     bad.mkdir()

@@ -122,14 +122,20 @@ def select(sets: list[BenchSet], *, pieces: tuple[int, int] = (2, 20), limit: in
     return chosen
 
 
-def options_key(config, *, n_points: int, solver=None) -> str:
+def _qualified(fn) -> str | None:
+    return None if fn is None else f"{fn.__module__}.{fn.__qualname__}"
+
+
+def options_key(config, *, n_points: int, solver=None, extra=None) -> str:
     """What a set's result depends on besides the set: the version, the Config (seed and
-    settings), the points per piece and the solver. A rerun skips sets with this key. The
-    pieces filter, limit, timeout and workers select or schedule sets: they are not in it."""
+    settings), the points per piece, the solver and the extra scores. A rerun skips sets with
+    this key. The pieces filter, limit, timeout and workers select or schedule sets: they are
+    not in it."""
     from .config import to_dict
 
-    what = {"version": __version__, "config": to_dict(config), "n_points": n_points,
-            "solver": None if solver is None else f"{solver.__module__}.{solver.__qualname__}"}
+    what = {"version": __version__, "config": to_dict(config), "n_points": n_points, "solver": _qualified(solver)}
+    if extra is not None:  # only when given: the keys of runs without extra scores stay as they were
+        what["extra"] = _qualified(extra)
     return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
@@ -190,14 +196,17 @@ def pipeline_solver(meshes: dict, *, config) -> tuple[dict, dict]:
 
     Returns
     -------
-    predicted : name -> ``{"transform": (4, 4) T_world_fragment, "placed": bool}``
+    predicted : name -> ``{"transform": (4, 4) T_world_fragment, "placed": bool, "fracture":
+        (faces,) bool}``, the last the fracture faces the run found (``analysis.npz``'s
+        labels; a solver that does not segment may leave it out)
     info : what ``report.json`` says of the run: its steps' seconds, the gap it used (a
         fraction of the reference size), the most Taubin iterations a fragment was matched with
     """
     from .pipeline import reassemble
 
     result = reassemble(meshes, config, jobs=1)
-    predicted = {f.name: {"transform": result.T_world[k], "placed": bool(result.assembly.placed[k])}
+    predicted = {f.name: {"transform": result.T_world[k], "placed": bool(result.assembly.placed[k]),
+                          "fracture": np.asarray(f.segmentation.fracture, bool)}
                  for k, f in enumerate(result.fragments)}
     info = {"timings_s": {k: round(v, 3) for k, v in result.timings.items()},
             "gap": round(float(result.config.registration.gap), 6),
@@ -205,8 +214,8 @@ def pipeline_solver(meshes: dict, *, config) -> tuple[dict, dict]:
     return predicted, info
 
 
-def _solve_and_score(bench_set: BenchSet, *, config, n_points: int, solver) -> dict:
-    """Pose, solve and score one set (raises on any failure)."""
+def _solve_and_score(bench_set: BenchSet, *, config, n_points: int, solver, extra=None) -> dict:
+    """Pose, solve and score one set (raises on any failure); with ``extra``, its scores too."""
     from .metrics import evaluate
 
     seed = set_seed(config.seed, bench_set.id)
@@ -218,11 +227,14 @@ def _solve_and_score(bench_set: BenchSet, *, config, n_points: int, solver) -> d
     score = evaluate(truth, predicted, bbox_min=bbox_min, bbox_max=bbox_max, n_points=n_points, seed=config.seed)
     t3 = time.perf_counter()
     primary = score["alignments"][PRIMARY]
-    return {"pieces": len(truth), "placed": score["n_placed"], "anchor": primary.get("anchor"),
-            "metrics": {mode: a["summary"] for mode, a in score["alignments"].items()},
-            "rotation_errors_deg": [round(f["rotation_error_deg"], 6) for f in primary["fragments"].values()],
-            "timings_s": {"load": round(t1 - t0, 3), "solve": round(t2 - t1, 3), "score": round(t3 - t2, 3)},
-            "solver": info, "peak_rss_mb": _peak_rss_mb()}
+    record = {"pieces": len(truth), "placed": score["n_placed"], "anchor": primary.get("anchor"),
+              "metrics": {mode: a["summary"] for mode, a in score["alignments"].items()},
+              "rotation_errors_deg": [round(f["rotation_error_deg"], 6) for f in primary["fragments"].values()],
+              "timings_s": {"load": round(t1 - t0, 3), "solve": round(t2 - t1, 3), "score": round(t3 - t2, 3)},
+              "solver": info}
+    if extra is not None:  # here, in the set's process: the solver's arrays never travel back
+        record["extra"] = extra(bench_set=bench_set, meshes=meshes, predicted=predicted)
+    return {**record, "peak_rss_mb": _peak_rss_mb()}
 
 
 def _peak_rss_mb() -> float | None:
@@ -238,9 +250,17 @@ def _peak_rss_mb() -> float | None:
 
 
 def _child(conn, fn, kwargs) -> None:
+    import threading
+
+    from tqdm import tqdm
+
     from .allocator import retain_freed_memory
 
     retain_freed_memory()  # as `reassemble run` does
+    # tqdm's default lock is a named POSIX semaphore, registered with multiprocessing's resource
+    # tracker; a child killed at its timeout never unlinks it, and the tracker warns of a "leaked
+    # semaphore" when the run ends. No other process draws this one's bars: a thread lock will do.
+    tqdm.set_lock(threading.RLock())
     try:
         conn.send(("ok", fn(**kwargs)))
     except BaseException as exc:  # noqa: BLE001 - everything goes back to the parent as text
@@ -305,6 +325,9 @@ def _in_child(fn, kwargs: dict, *, timeout: float | None, memory_limit: float | 
         except EOFError:
             proc.join(5)
             raise _Stopped(f"crashed (the solving process ended with exit code {proc.exitcode})") from None
+        # let it end by itself: killed now, while it runs its exit handlers, it would leave what
+        # they release (semaphores, temporary files) to the resource tracker, which warns of leaks
+        proc.join(5)
     finally:
         if proc.is_alive():
             proc.kill()
@@ -320,7 +343,7 @@ class _Stopped(Exception):
 
 
 def run_set(bench_set: BenchSet, *, config, n_points: int = 1000, timeout: float | None = None,
-            solver=None, isolate: bool = True) -> dict:
+            solver=None, extra=None, isolate: bool = True) -> dict:
     """The task of one set: pose, solve, score; never raises.
 
     Parameters
@@ -331,6 +354,10 @@ def run_set(bench_set: BenchSet, *, config, n_points: int = 1000, timeout: float
     timeout : seconds allowed for the set (None or 0: no limit)
     solver : ``solver(meshes, *, config) -> (predicted, info)`` as :func:`pipeline_solver`
         (a module-level function: it is pickled to the workers); default that one
+    extra : ``extra(*, bench_set, meshes, predicted) -> dict``, more scores of a solved set,
+        computed in the set's process with the meshes as solved and the solver's
+        ``predicted`` (e.g. its ``fracture`` labels); kept as the record's ``extra``. A
+        module-level function too; None: none
     isolate : solve in a child process (killed at the timeout, or past the Dask worker's
         memory limit); False solves in this process (then a timeout cannot be enforced)
 
@@ -345,7 +372,7 @@ def run_set(bench_set: BenchSet, *, config, n_points: int = 1000, timeout: float
 
     record = {"set": bench_set.id, "kind": bench_set.kind, "category": bench_set.category,
               "pieces": bench_set.pieces, "seed": set_seed(config.seed, bench_set.id), "error": None}
-    kwargs = dict(bench_set=bench_set, config=config, n_points=n_points, solver=solver)
+    kwargs = dict(bench_set=bench_set, config=config, n_points=n_points, solver=solver, extra=extra)
     t0 = time.perf_counter()
     try:
         if isolate and not multiprocessing.current_process().daemon:
@@ -551,16 +578,19 @@ def _cluster(*, jobs: int, scheduler: str | None, memory_limit):
         logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler:
         return Client(scheduler), None
+    # the scheduler serves HTTP even without its dashboard, on 8787 by default: a port another cluster
+    # on the machine may hold (then Dask warns and takes another); ":0" takes a free one at once
     with dask.config.set({"distributed.worker.daemon": False, "distributed.scheduler.allowed-failures": 1,
                           "distributed.worker.memory.target": False, "distributed.worker.memory.spill": False}):
         cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address=":0", scheduler_kwargs={"dashboard": False},
+                               silence_logs=logging.ERROR)
         return Client(cluster), cluster
 
 
 def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, int] = (2, 20), limit: int | None = None,
           timeout: float | None = 600.0, jobs: int = 1, scheduler: str | None = None, memory_limit="auto",
-          n_points: int = 1000, solver=None, only=None, progress: bool = False) -> dict:
+          n_points: int = 1000, solver=None, extra=None, only=None, progress: bool = False) -> dict:
     """Solve and score every selected set of ``dataset``; write ``out/results.jsonl``,
     ``summary.json``, ``summary.md`` and the plots.
 
@@ -575,7 +605,7 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
     scheduler : address of an existing Dask scheduler instead (``tcp://host:8786``)
     memory_limit : per local worker, bytes or Dask's 'auto' (the RAM shared by the workers)
     n_points : surface points per piece for scoring
-    solver : see :func:`run_set`
+    solver, extra : see :func:`run_set`
     only : if given, the ids of the sets to consider (before ``pieces`` and ``limit``)
     progress : a progress bar with an ETA on stderr
 
@@ -594,7 +624,7 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     results = out / "results.jsonl"
-    key = options_key(config, n_points=n_points, solver=solver)
+    key = options_key(config, n_points=n_points, solver=solver, extra=extra)
     done = read_results(results, key=key)
 
     def again(rec):  # a set lost by the cluster, or over a shorter limit than this run's, is worth another try
@@ -610,7 +640,7 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
             with open(results, "a") as fh, tqdm(total=len(todo), unit="set", disable=not progress,
                                                  desc="bench") as bar:
                 for rec in _solved(client, todo, key=key, config=config, n_points=n_points, timeout=timeout,
-                                   solver=solver):
+                                   solver=solver, extra=extra):
                     _append(fh, rec)
                     done[rec["set"]] = rec
                     bar.update()
@@ -628,13 +658,14 @@ def bench(dataset: str | Path, out: str | Path, *, config, pieces: tuple[int, in
     return summary
 
 
-def _solved(client, todo: list[BenchSet], *, key: str, config, n_points: int, timeout, solver):
+def _solved(client, todo: list[BenchSet], *, key: str, config, n_points: int, timeout, solver, extra):
     """Each set's results line as its task finishes (in any order); a set the cluster lost
     is a line too, marked ``lost`` (a rerun tries it again)."""
     from distributed import as_completed
 
     futures = {client.submit(run_set, s, config=config, n_points=n_points, timeout=timeout, solver=solver,
-                             pure=False, retries=1, key=f"bench-{key}-{k}"): s for k, s in enumerate(todo)}
+                             extra=extra, pure=False, retries=1, key=f"bench-{key}-{k}"): s
+               for k, s in enumerate(todo)}
     for future in as_completed(futures):
         s = futures[future]
         try:

@@ -190,6 +190,63 @@ def killing_solver(meshes, *, config):
     return identity_solver(meshes, config=config)
 
 
+def labelling_solver(meshes, *, config):
+    """The identity, and the first face of every piece as its fracture."""
+    predicted, info = identity_solver(meshes, config=config)
+    for name, (_, f) in meshes.items():
+        predicted[name]["fracture"] = np.arange(len(f)) == 0
+    return predicted, info
+
+
+def fracture_faces(*, bench_set, meshes, predicted):
+    """An extra score: the fracture faces the solver gave, over the set."""
+    return {"set": bench_set.id, "fracture_faces": int(sum(p["fracture"].sum() for p in predicted.values())),
+            "faces": sum(len(f) for _, f in meshes.values())}
+
+
+def test_extra_scores_are_computed_in_the_sets_process_and_kept(tmp_path):
+    root = _tree(tmp_path / "t")
+    sets = discover(root)
+    rec = run_set(sets[1], config=Config(), solver=labelling_solver, extra=fracture_faces, isolate=False)
+    assert rec["error"] is None and rec["extra"] == {"set": sets[1].id, "fracture_faces": 3, "faces": 12}
+    # through bench: in the child process of a Dask worker, into results.jsonl, under its own key
+    summary = bench(root, tmp_path / "out", config=Config(), jobs=1, solver=labelling_solver, extra=fracture_faces,
+                    only={s.id for s in sets[:2]})
+    key = options_key(Config(), n_points=1000, solver=labelling_solver, extra=fracture_faces)
+    assert summary["key"] == key and key != options_key(Config(), n_points=1000, solver=labelling_solver)
+    records = read_results(tmp_path / "out/results.jsonl", key=key)
+    assert {r["extra"]["fracture_faces"] for r in records.values()} == {2, 3}
+    assert "extra" not in run_set(sets[1], config=Config(), solver=labelling_solver, isolate=False)
+
+
+def tqdm_then_sleep(seconds):
+    """What a solve does: a progress bar (tqdm's lock is a POSIX semaphore), then work."""
+    from tqdm import tqdm
+
+    for _ in tqdm(range(3), disable=True):
+        pass
+    time.sleep(seconds)
+    return {}
+
+
+def test_the_solving_processes_leak_no_semaphore(tmp_path):
+    """A child that answers and one killed at its timeout: no "leaked semaphore" warning from
+    multiprocessing's resource tracker when the parent ends."""
+    script = ("from reassemble.bench import _in_child, _Stopped\n"
+              "from tests.test_bench import tqdm_then_sleep\n"
+              "print(_in_child(tqdm_then_sleep, {'seconds': 0}, timeout=None, memory_limit=None))\n"
+              "try:\n    _in_child(tqdm_then_sleep, {'seconds': 30}, timeout=1, memory_limit=None)\n"
+              "except _Stopped as exc:\n    print(exc)\n")
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
+                          cwd=os.path.dirname(os.path.dirname(__file__)))
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == ["{}", "timeout (1 s)"]
+    assert "leaked" not in done.stderr and "resource_tracker" not in done.stderr, done.stderr
+
+
 def test_run_set_records_errors_instead_of_raising(tmp_path):
     bad = tmp_path / "bad"
     bad.mkdir()
@@ -255,6 +312,7 @@ def test_options_key_changes_with_what_changes_results():
     assert base != options_key(with_setting(Config(), "seed=3"), n_points=1000)
     assert base != options_key(Config(), n_points=500)
     assert base != options_key(Config(), n_points=1000, solver=identity_solver)
+    assert base != options_key(Config(), n_points=1000, extra=fracture_faces)
 
 
 def test_summary_counts_failed_sets_as_wrong():

@@ -8,25 +8,30 @@ The validation half first, the tuning half beside it.
 
 The sets (``data_synth.sets``: field-validation, field-tuning; split by mesh) live in
 ``SETS/field-validation`` and ``SETS/field-tuning``; the selected puzzles not there yet are
-built first (``python -m data_synth.make_sets`` builds a whole set). Per puzzle, in a
-worker process, ``run_to_folder`` (the code behind ``reassemble run``) runs with its
-defaults; its result is scored as ``reassemble eval`` does, anchored on the largest placed
+built first (``python -m data_synth.make_sets`` builds a whole set). Each half runs through
+``reassemble bench`` (:func:`reassemble.bench.bench`: each puzzle a task on a Dask
+LocalCluster of ``--jobs`` workers, solved in a child process by ``run``'s pipeline with its
+defaults, ``--timeout`` per puzzle, ``--results DIR`` keeps bench's resumable
+``results.jsonl``) and is scored as ``reassemble eval`` does, anchored on the largest placed
 fragment: strict part accuracy (mean chamfer under 1 % of the diagonal) and solved (every
-fragment strict-correct). The segmentation F1 is area-weighted over the puzzle's faces,
-the run's own fracture labels (its ``analysis.npz``) against the generator's exact ones.
-Time per fragment: the run's wall-clock and CPU time over its fragments. ``--baseline``
-also runs Open3D's textbook FPFH + RANSAC + ICP (``reassemble.baseline``) on the puzzles
-of at most ``--baseline-max-pieces``. Figures go to ``benchmarks/results/field.json``
-(a benchmark record, :mod:`benchmarks.common`: rewritten after every puzzle, so an
-interrupted run keeps what it measured; ``--resume`` skips puzzles already in it; every
-puzzle's row names the commit it ran at).
+fragment strict-correct). The segmentation F1 is area-weighted over the puzzle's faces, the
+run's own fracture labels (those of its ``analysis.npz``) against the generator's exact
+ones, computed in the puzzle's process by bench's ``extra`` hook
+(:func:`segmentation_scores`). Time per fragment: wall-clock of reading and solving (not of
+scoring) and the CPU time of solving, over the puzzle's fragments. ``--baseline`` also runs
+Open3D's textbook FPFH + RANSAC + ICP (``reassemble.baseline``, its own pool of processes,
+not bench: it is not ``run``'s pipeline) on the puzzles of at most ``--baseline-max-pieces``.
+Figures go to ``benchmarks/results/field.json`` (a benchmark record,
+:mod:`benchmarks.common`: rewritten after each half; ``--resume`` skips puzzles already in
+it; every puzzle's row names the commit it ran at).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
-import subprocess
+import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -45,26 +50,28 @@ def style_label(spec) -> str:
     return spec.style if spec.roughness is None else f"{spec.style} r{spec.roughness:g}"
 
 
-def _segmentation_f1(frag_dir: Path, out: Path, puzzle) -> dict:
-    """Area-weighted precision, recall and F1 of the run's fracture labels over the puzzle.
+def segmentation_f1(meshes: dict, predicted: dict, puzzle) -> dict:
+    """Area-weighted precision, recall and F1 of a run's fracture labels over a puzzle.
 
-    The run's meshes are read as the run read them (``load_fragments``); where the loader
-    changed a fragment's faces, the true labels are carried over by nearest face centre.
+    Parameters
+    ----------
+    meshes : name -> (vertices, faces), the fragments as the run read them (``load_fragments``)
+    predicted : name -> (faces,) bool, the run's fracture labels (fragments missing here are
+        left out)
+    puzzle : :class:`reassemble.puzzle.PuzzleFiles` read with its labels
+
+    Where the loader changed a fragment's faces, the true labels are carried over by nearest
+    face centre.
     """
     from scipy.spatial import cKDTree
 
     from reassemble.geometry import face_areas
-    from reassemble.pipeline import load_fragments
 
-    meshes, _ = load_fragments([frag_dir])
-    with np.load(out / "analysis.npz") as z:
-        names = [str(n) for n in z["names"]]
-        predicted = {n: z[f"fracture_{k}"].astype(bool) for k, n in enumerate(names)}
     truth, pred, area = [], [], []
     for name, (v, f) in meshes.items():
         if name not in predicted:
             continue
-        base = name.split(".")[0]
+        base = name.split(".")[0]  # 'stem.2': the second body of a file split in bodies
         gt_mesh, gt_lab = puzzle.meshes[base], puzzle.labels[base]
         if len(gt_mesh.faces) == len(f) and np.allclose(gt_mesh.vertices[gt_mesh.faces].mean(axis=1),
                                                         v[f].mean(axis=1)):
@@ -73,8 +80,10 @@ def _segmentation_f1(frag_dir: Path, out: Path, puzzle) -> dict:
             tree = cKDTree(gt_mesh.vertices[gt_mesh.faces].mean(axis=1))
             lab = gt_lab[tree.query(v[f].mean(axis=1))[1]]
         truth.append(lab == 1)
-        pred.append(predicted[name])
+        pred.append(np.asarray(predicted[name], bool))
         area.append(face_areas(v, f))
+    if not truth:
+        raise ValueError("no fracture labels from the solver to score")
     t, p, a = np.concatenate(truth), np.concatenate(pred), np.concatenate(area)
     tp = float(a[t & p].sum())
     precision = tp / max(float(a[p].sum()), 1e-300)
@@ -83,41 +92,42 @@ def _segmentation_f1(frag_dir: Path, out: Path, puzzle) -> dict:
             "f1": 2 * precision * recall / max(precision + recall, 1e-300)}
 
 
+def segmentation_scores(*, bench_set, meshes: dict, predicted: dict) -> dict:
+    """Bench's ``extra`` hook: the solved puzzle's :func:`segmentation_f1` (in its own process)."""
+    from reassemble.puzzle import read_puzzle
+
+    puzzle = read_puzzle(Path(bench_set.path) / "ground_truth.json")
+    return segmentation_f1(meshes, {n: p["fracture"] for n, p in predicted.items() if "fracture" in p}, puzzle)
+
+
+def field_solver(meshes: dict, *, config) -> tuple[dict, dict]:
+    """Bench's solver (``run``'s pipeline, :func:`reassemble.bench.pipeline_solver`), with the
+    CPU seconds of the solve in its info (bench records wall-clock only)."""
+    from reassemble.bench import pipeline_solver
+
+    cpu = time.process_time()
+    predicted, info = pipeline_solver(meshes, config=config)
+    return predicted, {**info, "cpu_s": round(time.process_time() - cpu, 3)}
+
+
+def row(rec: dict) -> dict:
+    """A puzzle's line of bench's ``results.jsonl`` as this benchmark's row."""
+    if rec["error"]:
+        # a failure is a figure too: the puzzle counts as unsolved. Its process's CPU time is not
+        # known (it may have been killed): the wall-clock of its single-threaded solve stands in
+        spent = float(rec.get("time_s") or 0.0)
+        return {"name": rec["set"], "error": rec["error"], "fragments": rec["pieces"], "time": spent, "cpu": spent,
+                "part_acc_strict": 0.0, "solved": False, "f1": 0.0, "precision": 0.0, "recall": 0.0, "placed": 0}
+    s, t = rec["metrics"][ALIGN], rec["timings_s"]
+    return {"name": rec["set"], "time": t["load"] + t["solve"], "cpu": rec["solver"]["cpu_s"],
+            "fragments": rec["pieces"], "placed": rec["placed"], "part_acc_strict": s["part_acc_strict"],
+            "solved": bool(s["solved"]), "rot_rmse_deg": s["rot_geodesic_rmse_deg"], **rec["extra"]}
+
+
 def _baseline(gt_path: Path, seed: int) -> dict:
     score, elapsed = fpfh_baseline(gt_path, seed=seed)
     s = score["alignments"][ALIGN]["summary"]
     return {"part_acc_strict": s["part_acc_strict"], "solved": bool(s["solved"]), "time": elapsed}
-
-
-def run_puzzle(gt_path: str, seed: int, baseline: bool, settings: tuple[str, ...] = ()) -> dict:
-    from reassemble.pipeline import evaluate_files, read_puzzle, run_to_folder
-
-    config = match_config(None, settings)
-
-    gt_path = Path(gt_path)
-    puzzle = read_puzzle(gt_path)
-    out = {"name": gt_path.parent.name}
-    with tempfile.TemporaryDirectory() as tmp:
-        wall, cpu = time.perf_counter(), time.process_time()
-        try:
-            report = run_to_folder([gt_path.parent / "fragments"], Path(tmp) / "out", config=config, seed=seed,
-                                   jobs=1)
-        except Exception as exc:  # a failure is a figure too: the puzzle counts as unsolved
-            out.update(error=f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}",
-                       fragments=len(puzzle.meshes), time=time.perf_counter() - wall,
-                       cpu=time.process_time() - cpu, part_acc_strict=0.0, solved=False, f1=0.0,
-                       precision=0.0, recall=0.0, placed=0)
-            return out
-        out["time"], out["cpu"] = time.perf_counter() - wall, time.process_time() - cpu
-        score = evaluate_files(Path(tmp) / "out" / "transforms.json", gt_path)
-        s = score["alignments"][ALIGN]["summary"]
-        out.update(fragments=len(puzzle.meshes), placed=report["summary"]["placed"],
-                   part_acc_strict=s["part_acc_strict"], solved=bool(s["solved"]),
-                   rot_rmse_deg=s["rot_geodesic_rmse_deg"])
-        out.update(_segmentation_f1(gt_path.parent / "fragments", Path(tmp) / "out", puzzle))
-    if baseline:
-        out["baseline"] = _baseline(gt_path, seed)
-    return out
 
 
 def _group(rows: list[dict]) -> dict:
@@ -223,11 +233,8 @@ def headline(figs: dict) -> list[tuple[str, str]]:
              f"{g['f1']:.2f} / {g['part_acc_strict']:.2f}")]
 
 
-def main(argv: list[str] | None = None) -> int:
-    import sys
-
-    from data_synth.make_sets import add_field_options, build_specs
-    from data_synth.sets import FIELD_MESHES, SETS
+def _parser() -> argparse.ArgumentParser:
+    from data_synth.make_sets import add_field_options
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks.accuracy.field", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -241,28 +248,30 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--noisy-only", action="store_true")
     parser.add_argument("--baseline", action="store_true", help="also the Open3D textbook pipeline")
     parser.add_argument("--baseline-max-pieces", type=int, default=8)
-    parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once (each run uses one process)")
+    parser.add_argument("--jobs", type=int, default=1, help="puzzles run at once (bench's workers; each run uses "
+                        "one process)")
+    parser.add_argument("--timeout", type=float, default=0, help="seconds per puzzle, then it counts as failed "
+                        "(default 0: none)")
     parser.add_argument("--seed", type=int, default=0)
     add_setting_option(parser)
-    parser.add_argument("--json", "--out", dest="out", type=Path, default=REPO / "benchmarks" / "results" / "accuracy.field.json",
+    parser.add_argument("--results", type=Path, default=None, metavar="DIR",
+                        help="keep reassemble bench's results here, DIR/<half>/results.jsonl (a rerun with the "
+                        "same options resumes; default a temporary folder)")
+    parser.add_argument("--json", "--out", dest="out", type=Path,
+                        default=REPO / "benchmarks" / "results" / "accuracy.field.json",
                         help="the record (default benchmarks/results/accuracy.field.json)")
     parser.add_argument("--resume", action="store_true", help="keep the puzzles already in --out")
     parser.add_argument("--report", action="store_true", help="only print the tables of --out, run nothing")
-    args = parser.parse_args(argv)
-    if args.report:
-        saved = json.loads(args.out.read_text())
-        print(f"{args.out}: {machine_line(saved['machine'])}\ncommand: {saved['command']}\ncommit: {saved['commit']}; "
-              f"{len(saved['figures']['puzzles'])} puzzles")
-        print_tables(saved["figures"]["halves"])
-        return 0
-    bench = start()
-    commit = bench.git["commit"] + ("+changes" if bench.git["dirty"] else "") if bench.git["commit"] else "unknown"
-    halves = [h.strip() for h in args.halves.split(",") if h.strip()]
-    if any(h not in HALVES for h in halves):
-        print(f"field: error: --halves takes {', '.join(HALVES)}", file=sys.stderr)
-        return 2
+    return parser
 
-    todo = []  # (half, spec, ground truth path)
+
+def selected(args, halves: list[str]) -> tuple[list[tuple], list[dict]]:
+    """The (half, spec, ground truth path) the options select, the missing ones built first;
+    and the puzzles that could not be built."""
+    from data_synth.make_sets import build_specs
+    from data_synth.sets import FIELD_MESHES, SETS
+
+    todo = []
     for half in halves:
         root = args.sets / HALVES[half]
         for spec in SETS[HALVES[half]]():
@@ -284,8 +293,57 @@ def main(argv: list[str] | None = None) -> int:
                 if "error" in b:
                     print(f"  not generated: {b['error']}", flush=True)
                     not_generated.append({"half": half, "name": b["name"], "error": b["error"]})
-    todo = [t for t in todo if t[2].is_file()]
+    return [t for t in todo if t[2].is_file()], not_generated
 
+
+def run_half(root: Path, specs: list, *, config, args, results: Path) -> list[dict]:
+    """The puzzles ``specs`` of one half through ``reassemble bench``, as this benchmark's rows
+    (in the order of ``specs``), with the baseline's figures where asked."""
+    from reassemble.bench import bench, options_key, read_results
+
+    # this module's functions by its import name, not __main__'s (python -m): the set's process
+    # unpickles them by name, and a __main__ there is not this module
+    from benchmarks.accuracy import field
+
+    hooks = {"solver": field.field_solver, "extra": field.segmentation_scores}
+    bench(root, results, config=config, pieces=(2, 10**6), timeout=args.timeout or None, jobs=args.jobs,
+          only={s.name for s in specs}, progress=True, **hooks)
+    records = read_results(results / "results.jsonl", key=options_key(config, n_points=1000, **hooks))
+    rows = [row(records[s.name]) for s in specs]
+    todo = [k for k, s in enumerate(specs) if args.baseline and s.pieces <= args.baseline_max_pieces]
+    if todo:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            gts = [root / specs[k].name / "ground_truth.json" for k in todo]
+            for k, b in zip(todo, pool.map(_baseline, gts, [args.seed] * len(todo))):
+                rows[k]["baseline"] = b
+    return rows
+
+
+def _print_row(r: dict) -> None:
+    base = f"  {r['baseline']['part_acc_strict']:>11.3f}" if "baseline" in r else ""
+    err = f"  ERROR {r['error']}" if "error" in r else ""
+    print(f"{r['half']:<10s} {r['name']:<44s} {r['fragments']:>5d} {r['placed']:>6d} {r['f1']:>6.3f} "
+          f"{r['part_acc_strict']:>6.3f} {str(r['solved']):>6s} {r['time']:>7.1f} {r['cpu']:>7.1f}{base}{err}",
+          flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from data_synth.sets import FIELD_MESHES
+
+    args = _parser().parse_args(argv)
+    if args.report:
+        saved = json.loads(args.out.read_text())
+        print(f"{args.out}: {machine_line(saved['machine'])}\ncommand: {saved['command']}\ncommit: {saved['commit']}; "
+              f"{len(saved['figures']['puzzles'])} puzzles")
+        print_tables(saved["figures"]["halves"])
+        return 0
+    record = start()
+    commit = record.git["commit"] + ("+changes" if record.git["dirty"] else "") if record.git["commit"] else "unknown"
+    halves = [h.strip() for h in args.halves.split(",") if h.strip()]
+    if any(h not in HALVES for h in halves):
+        print(f"field: error: --halves takes {', '.join(HALVES)}", file=sys.stderr)
+        return 2
+    todo, not_generated = selected(args, halves)
     done: dict[tuple[str, str], dict] = {}
     if args.resume and args.out.is_file():
         saved = json.loads(args.out.read_text())
@@ -294,30 +352,30 @@ def main(argv: list[str] | None = None) -> int:
     todo = [t for t in todo if (t[0], t[1].name) not in done]
     todo.sort(key=lambda t: (halves.index(t[0]), t[1].pieces))  # validation first, small puzzles first
     print(f"{len(todo)} puzzles to run ({len(rows)} kept from {args.out}); commit {commit}")
-    print(f"{'half':<10s} {'puzzle':<44s} {'frags':>5s} {'placed':>6s} {'F1':>6s} {'strict':>6s} {'solved':>6s} "
-          f"{'wall s':>7s} {'cpu s':>7s}" + ("  fpfh strict" if args.baseline else ""))
 
     def save() -> dict:
         figs = {h: figures([r for r in rows if r["half"] == h]) for h in halves if any(r["half"] == h for r in rows)}
-        bench.write(args.out, figures={"halves": figs, "puzzles": rows, "not_generated": not_generated},
-                    tables=tables(figs), headline=headline(figs))
+        record.write(args.out, figures={"halves": figs, "puzzles": rows, "not_generated": not_generated},
+                     tables=tables(figs), headline=headline(figs))
         return figs
 
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs, max_tasks_per_child=1) as pool:
-        futures = [(half, spec, pool.submit(run_puzzle, str(gt), args.seed,
-                                            args.baseline and spec.pieces <= args.baseline_max_pieces, tuple(args.setting)))
-                   for half, spec, gt in todo]
-        for half, spec, fut in futures:
-            r = fut.result()
-            r.update(half=half, commit=commit, settings=list(args.setting), mesh=spec.mesh, kind=FIELD_MESHES[spec.mesh].kind, style=style_label(spec),
-                     pieces=spec.pieces, noise=spec.noise)
-            rows.append(r)
-            base = f"  {r['baseline']['part_acc_strict']:>11.3f}" if "baseline" in r else ""
-            err = f"  ERROR {r['error']}" if "error" in r else ""
-            print(f"{half:<10s} {r['name']:<44s} {r['fragments']:>5d} {r['placed']:>6d} {r['f1']:>6.3f} "
-                  f"{r['part_acc_strict']:>6.3f} {str(r['solved']):>6s} {r['time']:>7.1f} {r['cpu']:>7.1f}{base}{err}",
-                  flush=True)
+    config = dataclasses.replace(match_config(None, tuple(args.setting)), seed=args.seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        for half in halves:
+            specs = [s for h, s, _ in todo if h == half]
+            if not specs:
+                continue
+            new = run_half(args.sets / HALVES[half], specs, config=config, args=args,
+                           results=(args.results or Path(tmp)) / half)
+            print(f"{'half':<10s} {'puzzle':<44s} {'frags':>5s} {'placed':>6s} {'F1':>6s} {'strict':>6s} "
+                  f"{'solved':>6s} {'wall s':>7s} {'cpu s':>7s}" + ("  fpfh strict" if args.baseline else ""))
+            for spec, r in zip(specs, new):
+                r.update(half=half, commit=commit, settings=list(args.setting), mesh=spec.mesh,
+                         kind=FIELD_MESHES[spec.mesh].kind, style=style_label(spec), pieces=spec.pieces,
+                         noise=spec.noise)
+                _print_row(r)
+            rows.extend(new)
             save()
     figs = save()
     print(f"\ntotal {time.perf_counter() - t0:.0f} s with --jobs {args.jobs}; figures in {args.out}")

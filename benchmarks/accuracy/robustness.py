@@ -7,14 +7,18 @@ Every mesh is broken (`reassemble break`, the bench set's meshes and seed 0) onc
 setting: vertex noise sigma (fraction of the object diagonal) with no gap, gaps
 (material lost at the break, mating surfaces that far apart: `break --gap`) with no noise,
 and decimation (`break --decimate`: every fragment simplified to that tolerance).
-Each puzzle is assembled with `run_to_folder` (one process per puzzle) and scored as
-`reassemble eval` does, anchored on the largest placed fragment. Prints a line per
-puzzle, then the curves: mean strict part accuracy and share solved per level.
+The puzzles are broken first (``--jobs`` at once), into one tree, which then runs through
+``reassemble bench`` (:func:`reassemble.bench.bench`: each puzzle a task on a Dask
+LocalCluster of ``--jobs`` workers, solved in a child process by ``run``'s pipeline) and
+is scored as `reassemble eval` does, anchored on the largest placed fragment; a puzzle
+that fails counts as unsolved. Prints a line per puzzle (time: reading and solving), then
+the curves: mean strict part accuracy and share solved per level.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -27,23 +31,41 @@ from benchmarks.common import add_json_option, add_signature_radii, match_config
 MESHES = "spot,fish_low_resolution,torus,wingnut,angle_block,featuretype"
 
 
-def run_one(task) -> dict:
-    from reassemble.pipeline import break_to_folder, evaluate_files, run_to_folder
+def break_one(task) -> str:
+    """Break one mesh at one setting into ``folder`` (a puzzle, ``ground_truth.json`` beside
+    its fragments); its name in the tree."""
+    from reassemble.pipeline import break_to_folder
     from reassemble.synth import BreakParams
 
-    mesh, pieces, kind, level, seed, signature_radii = task
-    params = BreakParams(pieces=pieces, **{kind: level})
+    root, mesh, pieces, kind, level, seed = task
+    name = f"{kind}_{level:g}/{mesh}_{pieces}p"
+    break_to_folder(mesh, Path(root) / name, params=BreakParams(pieces=pieces, **{kind: level}), seed=seed)
+    return name
+
+
+def run_all(tasks: list[tuple], *, seed: int, signature_radii, jobs: int) -> list[dict]:
+    """Break every (mesh, pieces, kind, level), solve and score them all through bench."""
+    from reassemble.bench import bench, options_key, read_results
+
+    config = dataclasses.replace(match_config(signature_radii), seed=seed)
     with tempfile.TemporaryDirectory() as tmp:
-        puzzle = Path(tmp) / "puzzle"
-        break_to_folder(mesh, puzzle, params=params, seed=seed)
-        t = time.perf_counter()
-        run_to_folder([puzzle / "fragments"], Path(tmp) / "out", seed=seed,
-                      config=match_config(signature_radii))
-        elapsed = time.perf_counter() - t
-        s = evaluate_files(Path(tmp) / "out" / "transforms.json", puzzle / "ground_truth.json")
-    s = s["alignments"]["anchor_largest"]["summary"]
-    return {"mesh": mesh, "pieces": pieces, "kind": kind, "level": level, "strict": s["part_acc_strict"],
-            "solved": s["solved"], "rot": s["rot_geodesic_rmse_deg"], "time": elapsed}
+        tree, out = Path(tmp) / "puzzles", Path(tmp) / "bench"
+        with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
+            names = list(pool.map(break_one, [(tree, *t, seed) for t in tasks]))
+        bench(tree, out, config=config, pieces=(2, 10**6), timeout=None, jobs=max(1, jobs), progress=True)
+        records = read_results(out / "results.jsonl", key=options_key(config, n_points=1000))
+    rows = []
+    for (mesh, pieces, kind, level), name in zip(tasks, names):
+        rec = records[name]
+        r = {"mesh": mesh, "pieces": pieces, "kind": kind, "level": level}
+        if rec["error"]:  # a failure is a figure too: unsolved
+            rows.append({**r, "strict": 0.0, "solved": False, "rot": float("nan"), "time": rec["time_s"] or 0.0,
+                         "error": rec["error"]})
+            continue
+        s = rec["metrics"]["anchor_largest"]
+        rows.append({**r, "strict": s["part_acc_strict"], "solved": s["solved"], "rot": s["rot_geodesic_rmse_deg"],
+                     "time": rec["timings_s"]["load"] + rec["timings_s"]["solve"]})
+    return rows
 
 
 def main() -> int:
@@ -59,19 +81,18 @@ def main() -> int:
     add_json_option(parser)
     args = parser.parse_args()
     run = start()
-    tasks = [(m, int(p), kind, float(level), args.seed, args.signature_radii)
+    tasks = [(m, int(p), kind, float(level))
              for kind, levels in (("noise", args.noise), ("gap", args.gaps), ("decimate", args.decimate))
              for level in levels.split(",") if level
              for p in args.pieces.split(",") for m in args.meshes.split(",")]
+    t0 = time.perf_counter()
+    rows = run_all(tasks, seed=args.seed, signature_radii=args.signature_radii, jobs=args.jobs)
     print(f"{'mesh':<22s} {'pieces':>6s} {'kind':>8s} {'level':>6s} {'strict':>6s} {'solved':>6s} {'rot deg':>8s} "
           f"{'time s':>7s}", flush=True)
-    rows = []
-    t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for r in pool.map(run_one, tasks):
-            rows.append(r)
-            print(f"{r['mesh']:<22s} {r['pieces']:>6d} {r['kind']:>8s} {r['level']:>6g} {r['strict']:>6.3f} "
-                  f"{str(r['solved']):>6s} {r['rot']:>8.2f} {r['time']:>7.1f}", flush=True)
+    for r in rows:
+        err = f"  ERROR {r['error']}" if "error" in r else ""
+        print(f"{r['mesh']:<22s} {r['pieces']:>6d} {r['kind']:>8s} {r['level']:>6g} {r['strict']:>6.3f} "
+              f"{str(r['solved']):>6s} {r['rot']:>8.2f} {r['time']:>7.1f}{err}", flush=True)
     print(f"\ncurves (mean over {len(args.meshes.split(','))} meshes x pieces {args.pieces}):")
     curves = []
     for kind in ("noise", "gap", "decimate"):

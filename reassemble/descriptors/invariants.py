@@ -228,15 +228,21 @@ def _check_grid(grid: Grid, max_memory: float, what: str) -> None:
         )
 
 
-def _coefficients(spectrum: np.ndarray, kernels: list[np.ndarray], grid: Grid) -> list[np.ndarray]:
+def _spectral_factor(grid: Grid) -> np.ndarray:
+    """The prefilter times the spline integration factor on the grid's half-spectrum (float32)."""
+    return (bspline_prefilter(grid.shape) * spline_integration(grid.shape, grid.h)).astype(np.float32)
+
+
+def _coefficients(spectrum: np.ndarray, kernels: list[np.ndarray], grid: Grid, *, pre=None) -> list[np.ndarray]:
     """B-spline coefficient grids of the spline through the grid samples integrated against each kernel.
 
     One spectral factor does both: spline integration of the samples, and the prefilter
-    that turns the result into B-spline coefficients for reading it between nodes.
+    that turns the result into B-spline coefficients for reading it between nodes
+    (``pre``: :func:`_spectral_factor`, if already computed).
     """
     from scipy.fft import irfftn
 
-    pre = (bspline_prefilter(grid.shape) * spline_integration(grid.shape, grid.h)).astype(np.float32)
+    pre = _spectral_factor(grid) if pre is None else pre
     coeffs = []
     for kernel in kernels:
         kernel *= pre  # in place: the kernels are built for this call only
@@ -303,13 +309,14 @@ def _level_integrals(
             spheres.append(s)
         else:
             kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, r))
-    coeffs = _coefficients(spectrum, kernels, grid)
+    pre = _spectral_factor(grid)
+    coeffs = _coefficients(spectrum, kernels, grid, pre=pre)
     values = bspline_eval(coeffs, u)
     area = np.stack([bspline_gradient(coeffs[2 * j], u) / grid.h for j in range(k)], axis=1)
     del coeffs
     out = {"V": values[:, 0::2], "P": values[:, 1::2], "SA": np.full((n, k), np.nan), "area": area}
     for j, s in enumerate(spheres):  # one grid at a time: no more memory than V and P took
-        out["SA"][:, j] = bspline_eval(_coefficients(spectrum, [s], grid), u)[:, 0]
+        out["SA"][:, j] = bspline_eval(_coefficients(spectrum, [s], grid, pre=pre), u)[:, 0]
     spheres.clear()
     if params.principal:
         out["K2_cov"], out["dir1"], out["normal"] = np.empty((n, k)), np.empty((n, k, 3)), np.empty((n, k, 3))

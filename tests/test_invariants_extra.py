@@ -14,7 +14,13 @@ from scipy.integrate import quad
 
 from reassemble.descriptors import DescriptorParams, integral_invariants
 from reassemble.descriptors.invariants import signed_distance_mean_curvature, sphere_curvature_difference_sq
-from reassemble.descriptors.kernels import ball_sphere_spectra, ball_spectrum, bspline_gradient, bspline_prefilter, sphere_spectrum
+from reassemble.descriptors.kernels import (
+    ball_sphere_spectra,
+    ball_spectrum,
+    bspline_gradient,
+    bspline_prefilter,
+    sphere_spectrum,
+)
 from reassemble.descriptors.voxelize import saturated_signed
 
 

@@ -1,4 +1,5 @@
-"""Multi-scale integral invariants V_r, P_r, D2_r and the curvatures they estimate.
+"""Multi-scale integral invariants V_r, P_r, D2_r, SA_r, D_r, SD2_r, the area vector, and the
+curvatures and normals they estimate.
 
 For a closed surface bounding the solid D, a query point p and a kernel radius r
 (Pottmann et al. 2009, Sections 5, 7 and 9.1):
@@ -13,16 +14,16 @@ For a closed surface bounding the solid D, a query point p and a kernel radius r
 - ``SA_r(p)`` = area of the sphere p + rS inside the solid = dV_r/dr;
   ``H_SA = 2/r - SA_r/(pi r^3)``  (Eqs. 18-19)
 - ``D_r(p)`` = ∫ over the ball of the signed distance (> 0 outside) = 4 pi H r^5/15 + O(r^6)
-  (Theorem 4); ``SD2_r(p)`` = ∫ over the sphere p + rS of dist^2 = dD2_r/dr, whose
-  ``(28... )`` counterpart is ``(20 pi r^4 - 15 SD2_r)/(pi r^6)``  (Eq. 33)
+  (Theorem 4); ``SD2_r(p)`` = ∫ over the sphere p + rS of dist^2 = dD2_r/dr;
+  ``(kappa1 - kappa2)^2 = (20 pi r^4 - 15 SD2_r)/(pi r^6)``  (Eq. 33)
 - the area vector ``a_r(p) = grad V_r(p) = pi (r^2 - (3H^2 - K) r^4/8) n_in + O(r^5)``
   (Theorem 2, n_in the inward normal): its direction is a normal estimate
 
-Each is a convolution of a grid (occupancy, or squared distance) with a radial kernel,
-done by FFT with the kernel's exact Fourier transform. Radii whose ``r / h`` falls in
+Each is a convolution of a grid (occupancy, or squared or signed distance) with a radial
+kernel (the ball, or the sphere for SA_r and SD2_r), done by FFT with the kernel's exact Fourier transform. Radii whose ``r / h`` falls in
 the same octave share one occupancy grid and its forward FFT. Results are read at the
 query points by cubic B-spline interpolation, whose prefilter is applied in the
-Fourier domain for free.
+Fourier domain for free; the area vector is the gradient of V's spline.
 """
 
 from __future__ import annotations

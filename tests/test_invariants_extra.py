@@ -15,7 +15,6 @@ from scipy.integrate import quad
 from reassemble.descriptors import DescriptorParams, integral_invariants
 from reassemble.descriptors.invariants import signed_distance_mean_curvature, sphere_curvature_difference_sq
 from reassemble.descriptors.kernels import (
-    ball_sphere_spectra,
     ball_spectrum,
     bspline_gradient,
     bspline_prefilter,
@@ -62,7 +61,7 @@ def sphere():
     R = (3 * m.volume / (4 * np.pi)) ** (1 / 3)  # the volume-equivalent radius
     q = V[np.random.default_rng(0).choice(len(V), 200, replace=False)]
     radii = np.array([0.15, 0.3])
-    return integral_invariants(V, F, radii, points=q), R
+    return integral_invariants(V, F, radii, points=q), R, V, F
 
 
 @pytest.fixture(scope="module")
@@ -88,8 +87,6 @@ def test_sphere_kernel_is_the_balls_derivative_in_r():
     for kk in k[1:]:  # the transform of the uniform measure on the sphere, by quadrature
         exact = quad(lambda t: 2 * np.pi * r * r * np.cos(kk * r * t), -1, 1)[0]
         assert sphere_spectrum(np.array([kk]), r)[0] == pytest.approx(exact, rel=1e-5, abs=1e-5)
-    v, p, s = ball_sphere_spectra(k, r)
-    assert np.array_equal(v, ball_spectrum(k, r)) and np.allclose(s, sphere_spectrum(k, r), rtol=1e-6)
 
 
 def test_bspline_gradient_of_a_smooth_field():
@@ -116,7 +113,7 @@ def test_saturated_signed_distance_is_odd_smooth_and_exact_within_r():
 
 
 def test_sphere_area_gives_mean_curvature_on_a_sphere(sphere):
-    d, R = sphere
+    d, R = sphere[:2]
     D = np.linalg.norm(d.points, axis=1)
     for j, r in enumerate(d.radii):
         dH = (d.SA[:, j] - sphere_area(r, R, D)) / (np.pi * r**3)  # H error, H = 1
@@ -133,7 +130,7 @@ def test_sphere_area_on_a_plane_follows_the_offset(plane):
 
 
 def test_signed_distance_integrals_on_a_sphere(sphere):
-    d, R = sphere
+    d, R = sphere[:2]
     D = np.linalg.norm(d.points, axis=1)
     for j, r in enumerate(d.radii):
         ref = np.array([signed_distance_integral(r, R, x) for x in D])
@@ -156,7 +153,7 @@ def test_signed_distance_integrals_on_a_plane(plane):
 
 
 def test_area_vector_on_a_sphere_and_a_plane(sphere, plane):
-    d, R = sphere
+    d, R = sphere[:2]
     D = np.linalg.norm(d.points, axis=1)
     for j, r in enumerate(d.radii):
         length = np.linalg.norm(d.area[:, j], axis=1)
@@ -197,3 +194,18 @@ def test_describe_writes_the_new_arrays_beside_the_old(tmp_path):
         assert z[key].shape == (n, 2) and np.isfinite(z[key]).all()
     assert z["normal_area"].shape == (n, 2, 3)
     assert np.allclose(np.linalg.norm(z["normal_area"], axis=2), 1.0)
+
+
+def test_an_offset_moves_V_SA_and_D_at_the_rates_of_theorems_7_and_8(sphere):
+    """The sphere grown by delta: V_r by pi r^2 delta (Theorem 7), SA_r by 2 pi r delta (Theorem 8),
+    D_r by -4 pi r^3 delta / 3 (every distance shorter by delta), to first order; the normals stay."""
+    d, R, V, F = sphere
+    delta = 0.002
+    grown = integral_invariants(V * (1 + delta), F, d.radii, points=d.points)
+    for j, r in enumerate(d.radii):
+        # exact rates on the unit sphere exceed the first-order ones by 0.1 %; measured 0.3-1.2 %
+        assert np.mean(grown.V[:, j] - d.V[:, j]) / (np.pi * r * r * delta) == pytest.approx(1, abs=0.02)
+        assert np.mean(grown.SA[:, j] - d.SA[:, j]) / (2 * np.pi * r * delta) == pytest.approx(1, abs=0.03)
+        assert np.mean(grown.D[:, j] - d.D[:, j]) / (-4 * np.pi * r**3 * delta / 3) == pytest.approx(1, abs=0.002)
+        cos = np.einsum("ij,ij->i", grown.normal_area[:, j], d.normal_area[:, j])
+        assert np.degrees(np.arccos(np.clip(cos.min(), -1, 1))) < 0.2

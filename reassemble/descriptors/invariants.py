@@ -40,7 +40,6 @@ from ..repair import is_closed_solid
 from .kernels import (
     ball_moment_spectra,
     ball_spectra,
-    ball_sphere_spectra,
     ball_spectrum,
     bspline_eval,
     bspline_gradient,
@@ -302,23 +301,18 @@ def _level_integrals(
     """
     n, k = len(points), len(radii)
     u = (points - grid.origin) / grid.h
-    kernels, spheres = [], []
+    kernels = []
     for r in radii:
-        if params.sphere_area:
-            v, p, s = radial_on_grid(ball_sphere_spectra, grid.shape, grid.h, r)
-            kernels += [v, p]
-            spheres.append(s)
-        else:
-            kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, r))
+        kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, r))
     pre = _spectral_factor(grid)
     coeffs = _coefficients(spectrum, kernels, grid, pre=pre)
     values = bspline_eval(coeffs, u)
     area = np.stack([bspline_gradient(coeffs[2 * j], u) / grid.h for j in range(k)], axis=1)
     del coeffs
     out = {"V": values[:, 0::2], "P": values[:, 1::2], "SA": np.full((n, k), np.nan), "area": area}
-    for j, s in enumerate(spheres):  # one grid at a time: no more memory than V and P took
-        out["SA"][:, j] = bspline_eval(_coefficients(spectrum, [s], grid, pre=pre), u)[:, 0]
-    spheres.clear()
+    for j, r in enumerate(radii if params.sphere_area else []):  # one grid at a time: no more memory
+        sphere = radial_on_grid(lambda k, r: (sphere_spectrum(k, r),), grid.shape, grid.h, r)
+        out["SA"][:, j] = bspline_eval(_coefficients(spectrum, list(sphere), grid, pre=pre), u)[:, 0]
     if params.principal:
         out["K2_cov"], out["dir1"], out["normal"] = np.empty((n, k)), np.empty((n, k, 3)), np.empty((n, k, 3))
         for j, r in enumerate(radii):

@@ -78,20 +78,6 @@ def sphere_spectrum(k: np.ndarray, r: float) -> np.ndarray:
     return out
 
 
-def ball_sphere_spectra(k: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`ball_spectra` and :func:`sphere_spectrum`, sharing sin and cos."""
-    x = np.asarray(k, np.float32) * np.float32(r)
-    sc = (np.sin(x), np.cos(x))
-    v = _radial_spectrum(x, 3, sc)
-    v *= np.float32(4.0 * np.pi * r**3)
-    p = _radial_spectrum(x, 5, sc)
-    p *= np.float32(4.0 * np.pi * r**5)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(x > 0, sc[0] / x, np.float32(1.0)).astype(np.float32)
-    s *= np.float32(4.0 * np.pi * r * r)
-    return v, p, s
-
-
 def radial_on_grid(func, shape: tuple[int, int, int], h: float, *args):
     """Evaluate radial spectra ``func(k, *args)`` on an rfftn half-spectrum, using its symmetry.
 

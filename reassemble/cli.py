@@ -361,8 +361,10 @@ def _add_describe(sub) -> None:
         help="multi-scale integral invariants (V_r, D2_r and curvatures) of a mesh",
         description="Integral invariants at every (welded) vertex: V_r (volume of ball and solid), "
         "P_r (its second moment), D2_r (squared distance integral) and the curvatures they give: "
-        "H (mean), H_rob (offset-robust mean), K2 = (kappa1 - kappa2)^2. Written to an .npz with "
-        "arrays vertices (n x 3), faces, radii (m) and n x m arrays V, P, D2, H, H_rob, K2.",
+        "H (mean), H_rob (offset-robust mean), K2 = (kappa1 - kappa2)^2; SA_r (sphere area, dV_r/dr), "
+        "D_r (signed distance integral), SD2_r (squared distance over the sphere) and the normal "
+        "of the area vector grad V_r. Written to an .npz with arrays vertices (n x 3), faces, "
+        "radii (m), n x m arrays V, P, D2, H, H_rob, K2, SA, D, SD2 and n x m x 3 normal_area.",
     )
     p.add_argument("mesh", help="mesh file, or the name of a bundled mesh")
     p.add_argument("--radii", type=_radii, required=True, help="comma-separated kernel radii, mesh units")
@@ -375,7 +377,9 @@ def _add_describe(sub) -> None:
     _option(p, "--d2-resolution", "describe.d2_resolution", type=_number, defaults=descriptor,
             help="voxels per radius of the squared-distance grids")
     _option(p, "--no-d2", "describe.with_d2", action="store_false", show=None,
-            help="skip D2_r and K2 (the slow part)")
+            help="skip D2_r and K2, and D_r and SD2_r (the slow part: NaN in the file)")
+    _option(p, "--no-sphere-area", "describe.sphere_area", action="store_false", show=None,
+            help="skip SA_r (one more FFT per radius; NaN in the file)")
     _option(p, "--principal", "describe.principal", action="store_true", show=None,
             help="also principal curvatures k1, k2, K2_cov, directions dir1 and normals "
             "from the covariance of ball and solid (robust to noise, unlike K2 from D2)")

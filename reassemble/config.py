@@ -65,7 +65,7 @@ class Config:
     thin_walls: bool | None = None
     fill_holes: float | None = None
     split_bodies: bool = False
-    describe: DescriptorParams = DescriptorParams(with_d2=False, principal=True)
+    describe: DescriptorParams = DescriptorParams(with_d2=False, sphere_area=False, principal=True)
     segment: SegmentParams = SegmentParams()
     features: FeatureParams = FeatureParams()
     registration: RegistrationParams = RegistrationParams()

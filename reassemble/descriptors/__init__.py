@@ -1,4 +1,4 @@
-"""Integral invariants: voxel grids (voxelize), ball kernels (kernels), V/P/D2 -> curvatures (invariants)."""
+"""Integral invariants: voxel grids (voxelize), ball kernels (kernels), V/P/D2/SA/D -> curvatures and normals (invariants)."""
 
 from .invariants import (  # noqa: F401
     DescriptorParams,
@@ -6,5 +6,9 @@ from .invariants import (  # noqa: F401
     curvature_difference_sq,
     integral_invariants,
     mean_curvature,
+    normal_from_area,
     robust_mean_curvature,
+    signed_distance_mean_curvature,
+    sphere_area_mean_curvature,
+    sphere_curvature_difference_sq,
 )

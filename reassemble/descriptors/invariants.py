@@ -1,4 +1,5 @@
-"""Multi-scale integral invariants V_r, P_r, D2_r and the curvatures they estimate.
+"""Multi-scale integral invariants V_r, P_r, D2_r, SA_r, D_r, SD2_r, the area vector, and the
+curvatures and normals they estimate.
 
 For a closed surface bounding the solid D, a query point p and a kernel radius r
 (Pottmann et al. 2009, Sections 5, 7 and 9.1):
@@ -10,12 +11,19 @@ For a closed surface bounding the solid D, a query point p and a kernel radius r
   and the sagitta of coarse meshes do not bias it to first order.
 - ``D2_r(p)`` = ∫ over the ball of dist(x, surface)^2;
   ``K2 = (kappa1 - kappa2)^2 = (28 pi r^5 - 105 D2_r) / (pi r^7)``  (Eq. 32)
+- ``SA_r(p)`` = area of the sphere p + rS inside the solid = dV_r/dr;
+  ``H_SA = 2/r - SA_r/(pi r^3)``  (Eqs. 18-19)
+- ``D_r(p)`` = ∫ over the ball of the signed distance (> 0 outside) = 4 pi H r^5/15 + O(r^6)
+  (Theorem 4); ``SD2_r(p)`` = ∫ over the sphere p + rS of dist^2 = dD2_r/dr;
+  ``(kappa1 - kappa2)^2 = (20 pi r^4 - 15 SD2_r)/(pi r^6)``  (Eq. 33)
+- the area vector ``a_r(p) = grad V_r(p) = pi (r^2 - (3H^2 - K) r^4/8) n_in + O(r^5)``
+  (Theorem 2, n_in the inward normal): its direction is a normal estimate
 
-Each is a convolution of a grid (occupancy, or squared distance) with a radial kernel,
-done by FFT with the kernel's exact Fourier transform. Radii whose ``r / h`` falls in
+Each is a convolution of a grid (occupancy, or squared or signed distance) with a radial
+kernel (the ball, or the sphere for SA_r and SD2_r), done by FFT with the kernel's exact Fourier transform. Radii whose ``r / h`` falls in
 the same octave share one occupancy grid and its forward FFT. Results are read at the
 query points by cubic B-spline interpolation, whose prefilter is applied in the
-Fourier domain for free.
+Fourier domain for free; the area vector is the gradient of V's spline.
 """
 
 from __future__ import annotations
@@ -34,11 +42,24 @@ from .kernels import (
     ball_spectra,
     ball_spectrum,
     bspline_eval,
+    bspline_gradient,
     bspline_prefilter,
     radial_on_grid,
+    sphere_spectrum,
     spline_integration,
 )
-from .voxelize import Grid, make_grid, occupancy, saturated_square, squared_distance, winding_occupancy
+from .voxelize import (
+    Grid,
+    distance_band,
+    inside_centres,
+    make_grid,
+    occupancy,
+    saturated_signed,
+    saturated_square,
+    signed_distance,
+    squared_distance,
+    winding_occupancy,
+)
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +76,9 @@ class DescriptorParams:
         of the octave ladder with at least this many voxels per radius)
     d2_resolution : ``r / h`` of the squared-distance grid of each radius
     antialias : width of the occupancy ramp across the surface, in voxels
-    with_d2 : compute D2_r and K2 (the costly part: exact distances in a band about 2r wide)
+    with_d2 : compute D2_r and K2, and the signed-distance integrals D_r and SD2_r (the costly
+        part: exact distances in a band about 2r wide)
+    sphere_area : compute SA_r and H_SA (one more inverse FFT per radius)
     principal : also principal curvatures and directions from the covariance of ball ∩ solid
         (nine more convolutions per radius)
     max_memory : bytes of working memory allowed for one grid
@@ -65,6 +88,7 @@ class DescriptorParams:
     d2_resolution: float = 4.0
     antialias: float = 2.0
     with_d2: bool = True
+    sphere_area: bool = True
     principal: bool = False
     max_memory: float = 4e9
 
@@ -84,6 +108,11 @@ class Descriptors:
     K2_cov, k1, k2 : (n, m) with ``principal``: (kappa1 - kappa2)^2 from the covariance of
         ball ∩ solid (offset-robust to first order), and k1 >= k2 = H_rob ± sqrt(K2_cov)/2
     dir1, normal : (n, m, 3) with ``principal``: the direction of k1, and the outward normal
+    SA, H_SA : (n, m) sphere area descriptor and its mean curvature (NaN without ``sphere_area``)
+    D, SD2 : (n, m) signed-distance integral over the ball and squared-distance integral over
+        the sphere (NaN without ``with_d2``)
+    area : (n, m, 3) area vector, the gradient of V_r (Theorem 2)
+    normal_area : (n, m, 3) the outward unit normal it gives, ``-area / |area|``
     timings : seconds per stage
     """
 
@@ -100,6 +129,12 @@ class Descriptors:
     k2: np.ndarray | None = None
     dir1: np.ndarray | None = None
     normal: np.ndarray | None = None
+    SA: np.ndarray | None = None
+    H_SA: np.ndarray | None = None
+    D: np.ndarray | None = None
+    SD2: np.ndarray | None = None
+    area: np.ndarray | None = None
+    normal_area: np.ndarray | None = None
     timings: dict = field(default_factory=dict)
 
 
@@ -116,6 +151,36 @@ def robust_mean_curvature(V: np.ndarray, P: np.ndarray, r) -> np.ndarray:
 def curvature_difference_sq(D2: np.ndarray, r) -> np.ndarray:
     """Eq. 32: (kappa1 - kappa2)^2 = (28 pi r^5 - 105 D2)/(pi r^7)."""
     return (28.0 * np.pi * r**5 - 105.0 * D2) / (np.pi * r**7)
+
+
+def sphere_area_mean_curvature(SA: np.ndarray, r) -> np.ndarray:
+    """Eq. 19: H = 2/r - SA/(pi r^3), from SA_r = 2 pi r^2 - pi H r^3 + O(r^4) (Eq. 18)."""
+    return 2.0 / r - SA / (np.pi * r**3)
+
+
+def signed_distance_mean_curvature(D: np.ndarray, r) -> np.ndarray:
+    """Theorem 4: H = 15 D_r / (4 pi r^5)."""
+    return 15.0 * D / (4.0 * np.pi * r**5)
+
+
+def sphere_curvature_difference_sq(SD2: np.ndarray, r) -> np.ndarray:
+    """Eq. 33: (kappa1 - kappa2)^2 = (20 pi r^4 - 15 SD2)/(pi r^6)."""
+    return (20.0 * np.pi * r**4 - 15.0 * SD2) / (np.pi * r**6)
+
+
+def normal_from_area(area: np.ndarray) -> np.ndarray:
+    """Outward unit normals ``-a / |a|`` from area vectors (..., 3).
+
+    Notes
+    -----
+    The area vector a_r = grad V_r points into the solid, with length pi r^2 (1 - (3H^2 -
+    K) r^2/8) (Pottmann et al. 2009, Theorem 2, Eq. 23). Theorem 7's Remark 2 reads it
+    the other way: a surface offset by delta changes V_r by pi r^2 delta to first order, so
+    a zero-mean perturbation tilts a_r by a zero-mean amount, the same bound as V_r's.
+    """
+    norm = np.linalg.norm(area, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return -area / norm
 
 
 def principal_from_moments(V: np.ndarray, m: np.ndarray, M: np.ndarray, r) -> tuple[np.ndarray, ...]:
@@ -163,21 +228,31 @@ def _check_grid(grid: Grid, max_memory: float, what: str) -> None:
         )
 
 
-def _convolve_at(spectrum: np.ndarray, kernels: list[np.ndarray], grid: Grid, points: np.ndarray) -> np.ndarray:
-    """Integrate the cubic spline through the grid samples against each kernel; read at points.
+def _spectral_factor(grid: Grid) -> np.ndarray:
+    """The prefilter times the spline integration factor on the grid's half-spectrum (float32)."""
+    return (bspline_prefilter(grid.shape) * spline_integration(grid.shape, grid.h)).astype(np.float32)
+
+
+def _coefficients(spectrum: np.ndarray, kernels: list[np.ndarray], grid: Grid, *, pre=None) -> list[np.ndarray]:
+    """B-spline coefficient grids of the spline through the grid samples integrated against each kernel.
 
     One spectral factor does both: spline integration of the samples, and the prefilter
-    that turns the result into B-spline coefficients for reading it between nodes.
+    that turns the result into B-spline coefficients for reading it between nodes
+    (``pre``: :func:`_spectral_factor`, if already computed).
     """
     from scipy.fft import irfftn
 
-    pre = (bspline_prefilter(grid.shape) * spline_integration(grid.shape, grid.h)).astype(np.float32)
+    pre = _spectral_factor(grid) if pre is None else pre
     coeffs = []
     for kernel in kernels:
         kernel *= pre  # in place: the kernels are built for this call only
         coeffs.append(irfftn(spectrum * kernel, s=grid.shape, workers=-1))
-    u = (points - grid.origin) / grid.h
-    return bspline_eval(coeffs, u)
+    return coeffs
+
+
+def _convolve_at(spectrum: np.ndarray, kernels: list[np.ndarray], grid: Grid, points: np.ndarray) -> np.ndarray:
+    """Integrate the cubic spline through the grid samples against each kernel; read at points (n, k)."""
+    return bspline_eval(_coefficients(spectrum, kernels, grid), (points - grid.origin) / grid.h)
 
 
 def _check_radii(radii: np.ndarray, diag: float, params: DescriptorParams) -> None:
@@ -199,11 +274,74 @@ def _add_time(timings: dict, key: str, since: float) -> None:
     timings[key] = timings.get(key, 0.0) + time.perf_counter() - since
 
 
+def _level_integrals(
+    spectrum: np.ndarray, grid: Grid, radii: np.ndarray, points: np.ndarray, params: DescriptorParams,
+) -> dict[str, np.ndarray]:
+    """The volume integrals of the radii of one occupancy grid, read at the points.
+
+    Parameters
+    ----------
+    spectrum : rfftn of the grid's occupancy
+    grid : Grid
+    radii : (k,) kernel radii sharing the grid
+    points : (n, 3) query points
+    params : DescriptorParams
+
+    Returns
+    -------
+    V, P, SA : (n, k) (SA NaN without ``params.sphere_area``); area : (n, k, 3) area vectors;
+    with ``params.principal`` also K2_cov (n, k), dir1 and normal (n, k, 3)
+
+    Notes
+    -----
+    The area vector is the gradient of V_r (Pottmann et al. 2009, Theorem 2), read off the
+    cubic spline of V's convolved grid: no more FFTs, and exact for cubics where V is, to
+    leading order, a cubic in the offset from the surface. SA_r = dV_r/dr is the
+    occupancy integrated against the sphere p + rS, the derivative in r of the ball (Eq. 17).
+    """
+    n, k = len(points), len(radii)
+    u = (points - grid.origin) / grid.h
+    kernels = []
+    for r in radii:
+        kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, r))
+    pre = _spectral_factor(grid)
+    coeffs = _coefficients(spectrum, kernels, grid, pre=pre)
+    values = bspline_eval(coeffs, u)
+    area = np.stack([bspline_gradient(coeffs[2 * j], u) / grid.h for j in range(k)], axis=1)
+    del coeffs
+    out = {"V": values[:, 0::2], "P": values[:, 1::2], "SA": np.full((n, k), np.nan), "area": area}
+    for j, r in enumerate(radii if params.sphere_area else []):  # one grid at a time: no more memory
+        sphere = radial_on_grid(lambda k, r: (sphere_spectrum(k, r),), grid.shape, grid.h, r)
+        out["SA"][:, j] = bspline_eval(_coefficients(spectrum, list(sphere), grid, pre=pre), u)[:, 0]
+    if params.principal:
+        out["K2_cov"], out["dir1"], out["normal"] = np.empty((n, k)), np.empty((n, k, 3)), np.empty((n, k, 3))
+        for j, r in enumerate(radii):
+            mom = _convolve_at(spectrum, ball_moment_spectra(grid.shape, grid.h, r), grid, points)
+            out["K2_cov"][:, j], out["dir1"][:, j], out["normal"][:, j] = principal_from_moments(
+                out["V"][:, j], mom[:, :3], mom[:, 3:], r
+            )
+    # The ramp averages the solid over offsets of variance s2: V gains s2/2 * V'' and P
+    # s2/2 * P'', with V'' = pi r^2 H and P'' = pi r^4 H / 2 to leading order; SA = dV/dr
+    # gains s2/2 * d(V'')/dr = s2 pi r H (exact on a sphere).
+    s2 = (params.antialias * grid.h) ** 2 / 12.0
+    H_smooth = mean_curvature(out["V"], radii)
+    out["V"] = out["V"] - 0.5 * s2 * np.pi * radii**2 * H_smooth
+    out["P"] = out["P"] - 0.25 * s2 * np.pi * radii**4 * H_smooth
+    out["SA"] -= s2 * np.pi * radii * H_smooth
+    # and the circle where the sphere meets the surface shrinks by t^2 at offset t: the
+    # area vector's length pi (r^2 - t^2) loses pi s2 on average (curvature: O(s2 r^2 H^2))
+    length = np.linalg.norm(out["area"], axis=2, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out["area"] = out["area"] * (1.0 + np.pi * s2 / length)
+    return out
+
+
 def _volume_integrals(
     scene, vertices: np.ndarray, faces: np.ndarray, solid: bool, radii: np.ndarray, points: np.ndarray,
     params: DescriptorParams, timings: dict,
-) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
-    """V_r and P_r (and, with ``params.principal``, the covariance curvatures) at the points.
+) -> dict[str, np.ndarray]:
+    """V_r, P_r, SA_r, the area vectors (and, with ``params.principal``, the covariance
+    curvatures) at the points.
 
     Radii of one octave of ``r / h`` share an occupancy grid and its forward FFT.
 
@@ -219,16 +357,12 @@ def _volume_integrals(
 
     Returns
     -------
-    V, P : (n, m); principal : None, or K2_cov (n, m), dir1 (n, m, 3), normal (n, m, 3)
+    as :func:`_level_integrals`, for all m radii
     """
     from scipy.fft import rfftn
 
     bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
-    n, m = len(points), len(radii)
-    V = np.empty((n, m))
-    P = np.empty((n, m))
-    if params.principal:
-        K2c, dir1, normal = np.empty((n, m)), np.empty((n, m, 3)), np.empty((n, m, 3))
+    out: dict[str, np.ndarray] = {}
     r_min = radii.min()
     level = np.floor(np.log2(radii / r_min) + 1e-9).astype(int)
     winding = None
@@ -253,51 +387,48 @@ def _volume_integrals(
         t = time.perf_counter()
         spectrum = rfftn(occ, workers=-1)
         del occ
-        kernels = []
-        for i in idx:
-            kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, radii[i]))
-        values = _convolve_at(spectrum, kernels, grid, points)
-        if params.principal:
-            for j, i in enumerate(idx):
-                mom = _convolve_at(spectrum, ball_moment_spectra(grid.shape, grid.h, radii[i]), grid, points)
-                K2c[:, i], dir1[:, i], normal[:, i] = principal_from_moments(
-                    values[:, 2 * j], mom[:, :3], mom[:, 3:], radii[i]
-                )
-        # The ramp averages the solid over offsets of variance s2: V gains s2/2 * V'' and
-        # P s2/2 * P'', with V'' = pi r^2 H and P'' = pi r^4 H / 2 to leading order.
-        s2 = (params.antialias * h) ** 2 / 12.0
-        r_lev = radii[idx]
-        H_smooth = mean_curvature(values[:, 0::2], r_lev)
-        V[:, idx] = values[:, 0::2] - 0.5 * s2 * np.pi * r_lev**2 * H_smooth
-        P[:, idx] = values[:, 1::2] - 0.25 * s2 * np.pi * r_lev**4 * H_smooth
+        for key, value in _level_integrals(spectrum, grid, radii[idx], points, params).items():
+            if key not in out:
+                out[key] = np.empty((len(points), len(radii)) + value.shape[2:])
+            out[key][:, idx] = value
         _add_time(timings, "volume_fft", t)
         log.info("V, P for r = %s on a %s grid (h = %.3g)", radii[idx].round(6).tolist(), grid.shape, h)
-    return V, P, ((K2c, dir1, normal) if params.principal else None)
+    return out
 
 
 def _distance_integrals(
-    scene, vertices: np.ndarray, faces: np.ndarray, radii: np.ndarray, points: np.ndarray,
+    scene, vertices: np.ndarray, faces: np.ndarray, solid: bool, radii: np.ndarray, points: np.ndarray,
     params: DescriptorParams, timings: dict,
-) -> np.ndarray:
-    """D2_r at the points: the squared distance to the surface integrated over each ball.
+) -> dict[str, np.ndarray]:
+    """D2_r, SD2_r and D_r at the points: the squared distance to the surface integrated over
+    each ball and each sphere, and the signed distance over each ball.
 
     Parameters
     ----------
-    scene, vertices, faces, radii, points, params, timings : as in :func:`_volume_integrals`
+    scene, vertices, faces, solid, radii, points, params, timings : as in :func:`_volume_integrals`
 
     Returns
     -------
-    (n, m) D2
+    D2, SD2, D : (n, m)
+
+    Notes
+    -----
+    The signed distance (Pottmann et al. 2009, Section 7.1) shares the squared distance's band
+    and takes its sign from the inside of the grid's voxel centres. It is linear across the
+    surface, so its spline is exact there where the occupancy's ramp must be corrected for;
+    points in a ball about a surface point lie within r of the surface, so beyond the band it
+    is rolled off to ±c (:func:`voxelize.saturated_signed`) without changing D_r.
     """
     from scipy.fft import rfftn
 
     from .closest import MeshDistance
 
     bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
-    D2 = np.full((len(points), len(radii)), np.nan)
+    out = {key: np.full((len(points), len(radii)), np.nan) for key in ("D2", "SD2", "D")}
     t = time.perf_counter()
     distance = MeshDistance(vertices, faces)  # one face adjacency for every radius
     _add_time(timings, "distance", t)
+    winding = None
     for i, r in enumerate(radii):
         h = r / params.d2_resolution
         # exact d^2 wherever the spline of the samples can reach inside the ball, then a
@@ -306,19 +437,38 @@ def _distance_integrals(
         grid = make_grid(bbox_min, bbox_max, h=h, margin=band + 2 * h)
         _check_grid(grid, params.max_memory, f"D2 at radius {r:g}")
         t = time.perf_counter()
-        sq = squared_distance(distance, scene, grid, r=exact, band=band)
+        near = distance_band(distance, scene, grid, r=exact, band=band)
+        sq = squared_distance(distance, scene, grid, r=exact, band=band, near=near)
         _add_time(timings, "distance", t)
         t = time.perf_counter()
         spectrum = rfftn(sq, workers=-1)
         del sq
         far = float(saturated_square(np.array(band), exact, band))
-        (kernel,) = radial_on_grid(lambda k, r: (ball_spectrum(k, r),), grid.shape, grid.h, r)
-        D2[:, i] = _convolve_at(spectrum, [kernel], grid, points)[:, 0] + far * 4.0 * np.pi * r**3 / 3.0
+        ball, sphere = radial_on_grid(lambda k, r: (ball_spectrum(k, r), sphere_spectrum(k, r)), grid.shape, grid.h, r)
+        values = _convolve_at(spectrum, [ball, sphere], grid, points)
+        out["D2"][:, i] = values[:, 0] + far * 4.0 * np.pi * r**3 / 3.0
+        out["SD2"][:, i] = values[:, 1] + far * 4.0 * np.pi * r**2
         _add_time(timings, "d2_fft", t)
-    return D2
+        t = time.perf_counter()
+        if solid:
+            inside = inside_centres(scene, grid)
+        else:
+            if winding is None:
+                from ..repair import WindingNumber
+
+                winding = WindingNumber(vertices, faces)
+            inside = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding) > 0.5
+        spectrum = rfftn(signed_distance(near, inside, r=exact, band=band), workers=-1)
+        del inside, near
+        (ball,) = radial_on_grid(lambda k, r: (ball_spectrum(k, r),), grid.shape, grid.h, r)
+        c = float(saturated_signed(np.array(band), exact, band))
+        out["D"][:, i] = _convolve_at(spectrum, [ball], grid, points)[:, 0] + c * 4.0 * np.pi * r**3 / 3.0
+        _add_time(timings, "d_fft", t)
+    return out
 
 
 def integral_invariants(
+
     vertices: np.ndarray,
     faces: np.ndarray,
     radii,
@@ -356,22 +506,24 @@ def integral_invariants(
     solid = is_closed_solid(faces)  # else: an open or non-manifold surface (repair.repair_surface)
     timings["bvh"] = time.perf_counter() - t0
 
-    V, P, principal = _volume_integrals(scene, vertices, faces, solid, radii, points, params, timings)
+    vol = _volume_integrals(scene, vertices, faces, solid, radii, points, params, timings)
+    nan = np.full((len(points), len(radii)), np.nan)
     if params.with_d2:
-        D2 = _distance_integrals(scene, vertices, faces, radii, points, params, timings)
+        dist = _distance_integrals(scene, vertices, faces, solid, radii, points, params, timings)
     else:
-        D2 = np.full((len(points), len(radii)), np.nan)
+        dist = {"D2": nan, "SD2": nan.copy(), "D": nan.copy()}
 
     timings["total"] = time.perf_counter() - t0
+    V, P, D2 = vol["V"], vol["P"], dist["D2"]
     H = mean_curvature(V, radii)
     H_rob = robust_mean_curvature(V, P, radii)
     out = Descriptors(
         points=points.copy(), radii=radii.copy(), V=V, P=P, D2=D2, H=H, H_rob=H_rob,
-        K2=curvature_difference_sq(D2, radii), timings=timings,
+        K2=curvature_difference_sq(D2, radii), SA=vol["SA"], H_SA=sphere_area_mean_curvature(vol["SA"], radii),
+        D=dist["D"], SD2=dist["SD2"], area=vol["area"], normal_area=normal_from_area(vol["area"]), timings=timings,
     )
-    if principal is not None:
-        K2c, dir1, normal = principal
-        half = 0.5 * np.sqrt(K2c)
-        out.K2_cov, out.k1, out.k2 = K2c, H_rob + half, H_rob - half
-        out.dir1, out.normal = dir1, normal
+    if params.principal:
+        half = 0.5 * np.sqrt(vol["K2_cov"])
+        out.K2_cov, out.k1, out.k2 = vol["K2_cov"], H_rob + half, H_rob - half
+        out.dir1, out.normal = vol["dir1"], vol["normal"]
     return out

@@ -7,6 +7,8 @@ With ``x = k r``:
 - ball (volume descriptor V_r):  4 pi r^3 (sin x - x cos x) / x^3
 - ball weighted by |y|^2 (second moment P_r):
   4 pi r^5 (-x^3 cos x + 3 x^2 sin x + 6 x cos x - 6 sin x) / x^5
+- sphere (the uniform measure on the sphere of radius r; SA_r and SD2_r): 4 pi r^2 sin x / x,
+  the derivative in r of the ball's
 
 Both equal ``4 pi r^a sum_n (-1)^n x^(2n) / ((2n + a) (2n + 1)!)`` with a = 3, 5: the
 series is used for small x, where the closed forms cancel catastrophically.
@@ -62,6 +64,18 @@ def ball_spectra(k: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray]:
     p = _radial_spectrum(x, 5, sc)
     p *= np.float32(4.0 * np.pi * r**5)
     return v, p
+
+
+def sphere_spectrum(k: np.ndarray, r: float) -> np.ndarray:
+    """Fourier transform of the uniform measure on the sphere of radius r: 4 pi r^2 sin(x)/x, x = k r.
+
+    It is d/dr of :func:`ball_spectrum`: convolved with an occupancy grid it gives the sphere
+    area descriptor SA_r = dV_r/dr, with a squared-distance grid SD2_r (float32).
+    """
+    x = np.asarray(k, np.float32) * np.float32(r)
+    out = np.sinc(x / np.float32(np.pi)).astype(np.float32)
+    out *= np.float32(4.0 * np.pi * r * r)
+    return out
 
 
 def radial_on_grid(func, shape: tuple[int, int, int], h: float, *args):
@@ -139,6 +153,43 @@ def bspline_eval(coeffs: list[np.ndarray], points_grid: np.ndarray, *, chunk: in
         wt = (w[:, 0, :, None, None] * w[:, 1, None, :, None] * w[:, 2, None, None, :]).reshape(len(u), 64)
         for j, f in enumerate(flat):
             out[s : s + chunk, j] = np.einsum("ij,ij->i", f[lin], wt)
+    return out
+
+
+def bspline_gradient(coeff: np.ndarray, points_grid: np.ndarray, *, chunk: int = 65536) -> np.ndarray:
+    """Gradient of a cubic B-spline (given by its coefficient grid) at points, in voxel-index units.
+
+    Parameters
+    ----------
+    coeff : (nx, ny, nz) coefficients
+    points_grid : (n, 3) float, fractional voxel indices (at least 2 voxels from the edge)
+
+    Returns
+    -------
+    (n, 3) float64: d/du_x, d/du_y, d/du_z (divide by the spacing for length units)
+    """
+    shape = coeff.shape
+    flat = coeff.ravel()
+    n = len(points_grid)
+    out = np.empty((n, 3), np.float64)
+    offsets = np.arange(4)
+    for s in range(0, n, chunk):
+        u = points_grid[s : s + chunk]
+        fl = np.floor(u)
+        base = fl.astype(np.int64) - 1
+        t = u - fl
+        t2, t3 = t * t, t * t * t
+        w = np.stack([(1 - t) ** 3, 3 * t3 - 6 * t2 + 4, -3 * t3 + 3 * t2 + 3 * t + 1, t3], axis=-1) / 6.0
+        dw = np.stack([-3 * (1 - t) ** 2, 9 * t2 - 12 * t, -9 * t2 + 6 * t + 3, 3 * t2], axis=-1) / 6.0
+        ix = np.clip(base[:, 0, None] + offsets, 0, shape[0] - 1)
+        iy = np.clip(base[:, 1, None] + offsets, 0, shape[1] - 1)
+        iz = np.clip(base[:, 2, None] + offsets, 0, shape[2] - 1)
+        lin = ((ix[:, :, None, None] * shape[1] + iy[:, None, :, None]) * shape[2] + iz[:, None, None, :])
+        vals = flat[lin.reshape(len(u), 64)]
+        for a in range(3):
+            wa = [dw[:, i] if i == a else w[:, i] for i in range(3)]
+            wt = (wa[0][:, :, None, None] * wa[1][:, None, :, None] * wa[2][:, None, None, :]).reshape(len(u), 64)
+            out[s : s + chunk, a] = np.einsum("ij,ij->i", vals, wt)
     return out
 
 

@@ -353,6 +353,20 @@ def saturated_square(d: np.ndarray, r: float, band: float) -> np.ndarray:
     return np.where(d <= r, d * d, tail)
 
 
+def saturated_signed(d: np.ndarray, r: float, band: float) -> np.ndarray:
+    """``d`` up to ``|d| = r``, then an odd C2 roll-off to ``±(r + (band - r)/2)`` at ``|d| = band``.
+
+    The signed counterpart of :func:`saturated_square`: with u = (|d| - r)/(band - r), the
+    slope 1 - 3u^2 + 2u^3 falls from 1 to 0 with zero curvature at both ends.
+    """
+    d = np.asarray(d, dtype=np.float64)
+    a = np.abs(d)
+    L = band - r
+    u = np.clip((a - r) / L, 0.0, 1.0)
+    tail = r + L * (u - u**3 + 0.5 * u**4)
+    return np.where(a <= r, d, np.sign(d) * tail)
+
+
 def _distances(scene, grid: Grid, where: np.ndarray) -> np.ndarray:
     """Exact distances to the surface at the voxels with flat indices ``where``."""
     import open3d as o3d
@@ -371,7 +385,42 @@ def _closest_faces(scene, grid: Grid, where: np.ndarray) -> np.ndarray:
     return scene.compute_closest_points(o3d.core.Tensor(pts))["primitive_ids"].numpy().astype(np.int64)
 
 
-def squared_distance(distance, scene, grid: Grid, *, r: float, band: float) -> np.ndarray:
+def distance_band(distance, scene, grid: Grid, *, r: float, band: float) -> tuple[np.ndarray, np.ndarray]:
+    """The voxels within ``band`` of the surface and their squared distances, exact within ``r``
+    plus two voxels (:meth:`closest.MeshDistance.band`; the arguments as :func:`squared_distance`).
+
+    Returns
+    -------
+    where : (b,) int64 flat voxel indices; dist2 : (b,) float64
+    """
+    return distance.band(grid.origin, grid.h, grid.shape, band, r + 2 * grid.h,
+                         fallback=lambda idx: _closest_faces(scene, grid, idx))
+
+
+def signed_distance(near: tuple[np.ndarray, np.ndarray], inside: np.ndarray, *, r: float, band: float) -> np.ndarray:
+    """Signed distance to the surface (> 0 outside) within ``r``, rolled off to ``±c`` at ``band``.
+
+    Parameters
+    ----------
+    near : (where, dist2) of :func:`distance_band`
+    inside : (nx, ny, nz) bool, the voxel centres inside the solid
+    r, band : as :func:`squared_distance`
+
+    Returns
+    -------
+    (nx, ny, nz) float32: :func:`saturated_signed` of the signed distance minus its far
+    outside value ``c``: zero outside the band, ``-2c`` inside it.
+    """
+    where, dist2 = near
+    c = float(saturated_signed(np.array(band), r, band))
+    out = np.where(inside, np.float32(-2.0 * c), np.float32(0.0)).ravel()
+    d = np.sqrt(dist2)
+    d[inside.ravel()[where]] *= -1.0
+    out[where] = saturated_signed(d, r, band) - c
+    return out.reshape(inside.shape)
+
+
+def squared_distance(distance, scene, grid: Grid, *, r: float, band: float, near=None) -> np.ndarray:
     """Squared distance to the surface within ``r``, rolled off smoothly to a constant at ``band``.
 
     Parameters
@@ -381,6 +430,7 @@ def squared_distance(distance, scene, grid: Grid, *, r: float, band: float) -> n
         voxels where closest-triangle propagation may stop short (:meth:`closest.MeshDistance.band`)
     grid : Grid
     r : radius within which the distances are exact; band : where the roll-off ends
+    near : the result of :func:`distance_band` for these arguments, if already computed
 
     Returns
     -------
@@ -398,8 +448,7 @@ def squared_distance(distance, scene, grid: Grid, *, r: float, band: float) -> n
     triangle: rarely, near medial surfaces, a little too long).
     """
     far = float(saturated_square(np.array(band), r, band))
-    where, dist2 = distance.band(grid.origin, grid.h, grid.shape, band, r + 2 * grid.h,
-                                 fallback=lambda idx: _closest_faces(scene, grid, idx))
+    where, dist2 = distance_band(distance, scene, grid, r=r, band=band) if near is None else near
     out = np.zeros(grid.size, np.float32)
     out[where] = saturated_square(np.sqrt(dist2), r, band) - far
     return out.reshape(grid.shape)

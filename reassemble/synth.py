@@ -53,6 +53,9 @@ STYLES = ("fractal", "smooth", "cells", "mixed")
 # RMS height of a cut / radius of the piece it cuts, when --roughness is not given
 STYLE_ROUGHNESS = {"fractal": 0.08, "smooth": 0.05, "cells": 0.02}
 CELLS_PER_FRAGMENT = 4  # cells in a fragment written with keep_cell_faces
+# up to this many cells, each is cut from what the earlier ones left (the data_synth sets,
+# 20 pieces at most, were made so); beyond, from the solid itself (_partition's Notes)
+SEQUENTIAL_CELLS = 20
 
 
 @dataclass(frozen=True)
@@ -97,17 +100,23 @@ class BreakParams:
     style: str = "fractal"
     keep_cell_faces: bool = False
 
-    def __post_init__(self):
-        if self.roughness is None and self.style in STYLE_ROUGHNESS:
-            object.__setattr__(self, "roughness", STYLE_ROUGHNESS[self.style])
+    @property
+    def cut_roughness(self) -> float | None:
+        """``roughness``, or the style's default when it is None (None for ``mixed``).
+
+        Resolved when read, not when made: options changed later (``--style cells`` after
+        the defaults) then take their own style's default.
+        """
+        return STYLE_ROUGHNESS.get(self.style) if self.roughness is None else self.roughness
 
     def to_dict(self) -> dict:
-        """The options as written to ``ground_truth.json``.
+        """The options as written to ``ground_truth.json``, the roughness resolved.
 
         Options added after the first ground-truth format (``style``, ``keep_cell_faces``)
         are left out at their defaults, so a default puzzle's files read as before.
         """
         out = dataclasses.asdict(self)
+        out["roughness"] = self.cut_roughness
         for name in ("style", "keep_cell_faces"):
             if out[name] == BreakParams.__dataclass_fields__[name].default:
                 del out[name]
@@ -132,8 +141,8 @@ class BreakParams:
         if self.style == "mixed":
             if self.roughness is not None:
                 raise ReassembleError("--roughness does not apply to --style mixed (every cut draws its own)")
-        elif not 0.0 <= self.roughness <= 0.5:
-            raise ReassembleError(f"--roughness must be in [0, 0.5] (got {self.roughness})")
+        elif not 0.0 <= self.cut_roughness <= 0.5:
+            raise ReassembleError(f"--roughness must be in [0, 0.5] (got {self.cut_roughness})")
         if not 0.0 < self.hurst < 1.0:
             raise ReassembleError(f"hurst must be in (0, 1) (got {self.hurst})")
         if not 1e-4 <= self.cut_edge <= 0.1:
@@ -338,7 +347,7 @@ def _cut_height(style: str, roughness: float, n: int, radius: float, *, hurst: f
 def _draw_cut(params: BreakParams, rng) -> tuple[str, float]:
     """Style and roughness of one cut: the options', or for ``mixed`` a draw of its own."""
     if params.style != "mixed":
-        return params.style, params.roughness
+        return params.style, params.cut_roughness
     style = ("fractal", "smooth", "cells")[int(rng.integers(3))]
     return style, STYLE_ROUGHNESS[style] * float(rng.uniform(0.25, 1.5))
 
@@ -450,15 +459,18 @@ def _cell_seeds(points: np.ndarray, count: int, rng, *, iterations: int = 2) -> 
     return seeds
 
 
-def _cutter_pairs(points: np.ndarray, owner: np.ndarray, seeds: np.ndarray) -> list[list[int]]:
+def _cutter_pairs(points: np.ndarray, owner: np.ndarray, seeds: np.ndarray, *,
+                  start: list[set[int]] | None = None) -> list[list[int]]:
     """For every cell i, the later cells j whose bisector must bound it when the cells are
     cut out one after another (cell i = what is left, on i's side of those bisectors).
 
     Found by replaying the sequence on the grid points: a point cell i would take from a
     nearer seed m adds the pair (i, m), until every point goes to its nearest seed.
+    ``start``: pairs known before (e.g. cells that touch on the grid); without them the
+    first replay gives cell i every later cell, mostly bisectors that never meet it.
     """
     k = len(seeds)
-    later: list[set[int]] = [set() for _ in range(k)]
+    later: list[set[int]] = [set(s) for s in start] if start is not None else [set() for _ in range(k)]
     while True:
         taken = np.full(len(points), -1)
         for i in range(k - 1):
@@ -475,8 +487,25 @@ def _cutter_pairs(points: np.ndarray, owner: np.ndarray, seeds: np.ndarray) -> l
             later[i].add(m)
 
 
+def _touching_cells(grid_index: np.ndarray, owner: np.ndarray, count: int) -> list[set[int]]:
+    """For every cell i, the later cells whose grid points are next to its own (26-neighbours)."""
+    lo = grid_index.min(axis=0)
+    grid = np.full(tuple(grid_index.max(axis=0) - lo + 3), -1, dtype=np.int64)
+    grid[tuple((grid_index - lo + 1).T)] = owner
+    core = tuple(slice(1, n - 1) for n in grid.shape)
+    here = grid[core]
+    out: list[set[int]] = [set() for _ in range(count)]
+    for offset in np.ndindex(3, 3, 3):
+        there = grid[tuple(slice(1 + d - 1, n - 1 + d - 1) for d, n in zip(offset, grid.shape))]
+        both = (here >= 0) & (there >= 0) & (here < there)
+        for i, j in set(zip(here[both].tolist(), there[both].tolist())):
+            out[i].add(j)
+    return out
+
+
 def _partition(solid, seeds: np.ndarray, points: np.ndarray, owner: np.ndarray, *, step: float,
-               roughness: float, spacing: float | None, rng) -> tuple[list, set[int]]:
+               roughness: float, spacing: float | None, rng, grid_index: np.ndarray | None = None,
+               ) -> tuple[list, set[int]]:
     """Cut ``solid`` into the Voronoi-like cells of ``seeds`` (an exact partition).
 
     Cell i is what is left of the solid on i's side of the (gently undulating) bisectors
@@ -484,35 +513,81 @@ def _partition(solid, seeds: np.ndarray, points: np.ndarray, owner: np.ndarray, 
     is a pair's bisector, so mating faces are the same surface. ``spacing`` None: flat
     bisectors on a coarse grid. Returns the cells (some may be empty or in several bodies)
     and the cutters' IDs.
+
+    Notes
+    -----
+    Up to :data:`SEQUENTIAL_CELLS` cells, each is cut from the remainder of the ones before
+    (the puzzles made so far, byte for byte). Beyond, the remainder would gather every
+    earlier cut and each boolean grow with it, so a cell is cut from the solid and only the
+    earlier cells' regions that reach its own are taken away: the same set, at a cost that
+    grows with the number of cells, not its square. There, too, the bisectors are sought
+    from the cells that touch on the grid (``grid_index``, the points' integer grid
+    positions) rather than from none, which would give the first cells a bisector with
+    nearly every other.
     """
-    pairs = _cutter_pairs(points, owner, seeds)
-    rest, cells, ids = solid, [], set()
+    sequential = len(seeds) <= SEQUENTIAL_CELLS
+    start = None if sequential or grid_index is None else _touching_cells(grid_index, owner, len(seeds))
+    pairs = _cutter_pairs(points, owner, seeds, start=start)
+    regions, ids = [], set()
     for i in range(len(seeds) - 1):
-        region = points[owner == i]
-        poly = None
-        for j in pairs[i]:
-            mid = 0.5 * (seeds[i] + seeds[j])
-            normal = (seeds[j] - seeds[i]) / np.linalg.norm(seeds[j] - seeds[i])
-            reach = float(np.max(np.linalg.norm(region - mid, axis=1))) if len(region) else 0.0
-            radius = 1.02 * (reach + 3.0 * step)
-            if spacing is None or roughness == 0:
-                n = 16
-                height = np.zeros((n, n))
+        poly = _cell_region(seeds, points[owner == i], i, pairs[i], step=step, roughness=roughness,
+                            spacing=spacing, rng=rng)
+        regions.append(poly)
+        if poly is not None:
+            ids.update(poly[1])
+    if sequential:
+        rest, cells = solid, []
+        for poly in regions:
+            if poly is None:  # nothing later borders this cell: it is all that is left
+                cells.append(rest)
+                rest = rest - rest
             else:
-                n = int(np.clip(np.ceil(2.4 * radius / spacing) + 1, 16, 600))
-                height = _cut_height("cells", roughness, n, radius, hurst=0.5, rng=rng)
-            frame = _frame_from_normal(normal, rng)
-            cutter = _heightfield_solid(mid, frame, radius, 2.4 * radius / (n - 1), height, coarse_bottom=True)
-            ids.add(cutter.original_id())
-            poly = cutter if poly is None else poly ^ cutter
-        if poly is None:  # nothing later borders this cell: it is all that is left
-            cells.append(rest)
-            rest = rest - rest
-            continue
-        cells.append(rest ^ poly)
-        rest = rest - poly
-    cells.append(rest)
-    return cells, ids
+                cells.append(rest ^ poly[0])
+                rest = rest - poly[0]
+        return cells + [rest], ids
+    return _local_cells(solid, regions), ids
+
+
+def _cell_region(seeds, region, i: int, later: list[int], *, step: float, roughness: float, spacing, rng):
+    """The solid on cell i's side of its bisectors with the ``later`` cells (the
+    intersection of their cutters) and the cutters' IDs; None when there are none."""
+    poly, ids = None, []
+    for j in later:
+        mid = 0.5 * (seeds[i] + seeds[j])
+        normal = (seeds[j] - seeds[i]) / np.linalg.norm(seeds[j] - seeds[i])
+        reach = float(np.max(np.linalg.norm(region - mid, axis=1))) if len(region) else 0.0
+        radius = 1.02 * (reach + 3.0 * step)
+        if spacing is None or roughness == 0:
+            n = 16
+            height = np.zeros((n, n))
+        else:
+            n = int(np.clip(np.ceil(2.4 * radius / spacing) + 1, 16, 600))
+            height = _cut_height("cells", roughness, n, radius, hurst=0.5, rng=rng)
+        frame = _frame_from_normal(normal, rng)
+        cutter = _heightfield_solid(mid, frame, radius, 2.4 * radius / (n - 1), height, coarse_bottom=True)
+        ids.append(cutter.original_id())
+        poly = cutter if poly is None else poly ^ cutter
+    return None if poly is None else (poly, ids)
+
+
+def _local_cells(solid, regions: list) -> list:
+    """Cell i = the solid within region i, less the earlier regions whose boxes meet its
+    box; the last cell = the solid less every region (see :func:`_partition`)."""
+    import manifold3d as mf
+
+    def less(a, others):
+        return a - mf.Manifold.batch_boolean(others, mf.OpType.Add) if others else a
+
+    boxes = [None if r is None else np.reshape(r[0].bounding_box(), (2, 3)) for r in regions]
+    cells = []
+    for i, r in enumerate(regions):
+        if r is None:  # nothing later borders this cell: it is all that is left
+            cells.append(less(solid, [q[0] for q in regions[:i]]))
+            return cells + [solid - solid] * (len(regions) - i)
+        lo, hi = boxes[i]
+        near = [regions[m][0] for m in range(i) if np.all(boxes[m][0] <= hi) and np.all(lo <= boxes[m][1])]
+        cells.append(less(solid ^ r[0], near))
+    return cells + [less(solid, [r[0] for r in regions])]
 
 
 def _single_bodies(grid_index: np.ndarray, owner: np.ndarray, count: int) -> bool:
@@ -560,14 +635,43 @@ def _cells(solid, *, params: BreakParams, diag: float, rng) -> tuple[list, set[i
             counts = np.bincount(owner, minlength=params.pieces)
             if counts.min() * step**3 < min_vol or not _single_bodies(grid_index, owner, params.pieces):
                 continue
-            cells, ids = _partition(solid, seeds, points, owner, step=step, roughness=params.roughness,
-                                    spacing=params.cut_edge * diag, rng=rng)
+            cells, ids = _partition(solid, seeds, points, owner, step=step, roughness=params.cut_roughness,
+                                    spacing=params.cut_edge * diag, rng=rng, grid_index=grid_index)
+            if params.pieces > SEQUENTIAL_CELLS:  # with many cells some speck is near certain
+                cells = _absorb_specks(cells, speck=0.01 * total / params.pieces)
             parts = [p for c in cells for p in c.decompose()]
             if len(parts) == params.pieces and min(p.volume() for p in parts) >= min_vol:
-                return parts, ids, [("cells", params.roughness)] * len(ids)
+                return parts, ids, [("cells", params.cut_roughness)] * len(ids)
     raise ReassembleError(
         f"could not cut into {params.pieces} cells of one body each (try fewer --pieces)"
     )
+
+
+def _absorb_specks(cells: list, *, speck: float) -> list:
+    """Each speck (a body under ``speck`` volume split off a cell where an undulating
+    bisector grazes the surface) joined to a cell it touches, where they make one body;
+    the other bodies stay as they are (the cell then counts as several)."""
+    import manifold3d as mf
+
+    cells, specks = list(cells), []
+    for k, c in enumerate(cells):
+        bodies = sorted(c.decompose(), key=lambda b: -b.volume())
+        small = [b for b in bodies[1:] if b.volume() < speck]
+        if small:
+            specks += [(k, b) for b in small]
+            cells[k] = mf.Manifold.batch_boolean([b for b in bodies if not any(b is s for s in small)], mf.OpType.Add)
+    boxes = [np.reshape(c.bounding_box(), (2, 3)) for c in cells]
+    for k, b in specks:
+        lo, hi = np.reshape(b.bounding_box(), (2, 3))
+        for m in np.argsort([np.linalg.norm((bx[0] + bx[1]) - (lo + hi)) for bx in boxes]):
+            if m != k and not cells[m].is_empty() and np.all(boxes[m][0] <= hi) and np.all(lo <= boxes[m][1]):
+                joined = cells[m] + b
+                if len(joined.decompose()) == len(cells[m].decompose()):
+                    cells[m] = joined
+                    break
+        else:  # touches no other cell as one body: it stays its cell's
+            cells[k] = cells[k] + b
+    return cells
 
 
 def _split_into_cells(piece, *, count: int, rng) -> tuple[list, set[int]]:
@@ -698,9 +802,12 @@ def break_mesh(
     "Breaking Bad: A Dataset for Geometric Fracture and Reassembly", NeurIPS 2022): every
     cell is bounded by the bisectors of its seed and its neighbours', so pieces meet along
     edges and at corners.
-    Each cell is cut from what is left, so the cells partition the solid exactly even where
-    the bisectors undulate, and every cut face is a piece of one cutter: it is labelled
-    fracture and its mate lies on the same surface.
+    Each cell is cut from what is left (beyond :data:`SEQUENTIAL_CELLS`, from the solid
+    less the earlier cells' regions near it: the same set), so the cells partition the solid
+    exactly even where the bisectors undulate, and every cut face is a piece of one cutter:
+    it is labelled fracture and its mate lies on the same surface. With many cells, a speck
+    split off a cell where a bisector grazes the surface is joined to a neighbour; a
+    crumb-size void may stay beside it.
     """
     import manifold3d as mf
 

@@ -131,6 +131,21 @@ def tree_digest(root):
     return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
 
 
+def assert_same_run(a, b) -> None:
+    """Two run folders hold the same files, byte for byte but for report.json's timings."""
+    import json
+
+    a, b = tree_digest(a), tree_digest(b)
+    assert sorted(a) == sorted(b)
+    for k in a:
+        if k == "report.json":  # holds timings
+            ra, rb = json.loads(a[k]), json.loads(b[k])
+            ra["summary"].pop("timings_s"), rb["summary"].pop("timings_s")
+            assert ra == rb
+        else:
+            assert a[k] == b[k], k
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

@@ -10,7 +10,7 @@ import pytest
 
 from reassemble.parallel import pool_map, worker_state
 
-from .conftest import TORUS3, shared_run, tree_digest
+from .conftest import TORUS3, assert_same_run, shared_run
 
 
 @pytest.fixture(scope="module")
@@ -67,20 +67,10 @@ def test_an_unreachable_scheduler_is_a_one_line_error(tmp_path, puzzle_dir):
 def test_run_on_a_cluster_writes_what_a_local_run_writes(puzzles, cluster, tmp_path):
     """``reassemble run --scheduler`` on two Dask workers: the files of the local run of the
     same puzzle and seed, byte for byte but for the timings."""
-    import json
-
     local = puzzles.run(*TORUS3)
     out = tmp_path / "out"
     proc = subprocess.run([sys.executable, "-m", "reassemble", "run", str(puzzles.puzzle(*TORUS3) / "fragments"),
                            "--out", str(out), "--quiet", "--seed", "0", "--scheduler", cluster.scheduler_address],
                           capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr
-    a, b = tree_digest(local), tree_digest(out)
-    assert sorted(a) == sorted(b)
-    for k in a:
-        if k == "report.json":  # holds timings
-            ra, rb = json.loads(a[k]), json.loads(b[k])
-            ra["summary"].pop("timings_s"), rb["summary"].pop("timings_s")
-            assert ra == rb
-        else:
-            assert a[k] == b[k], k
+    assert_same_run(local, out)

@@ -121,6 +121,23 @@ def bspline_prefilter(shape: tuple[int, int, int]) -> np.ndarray:
     )
 
 
+def _stencil(u: np.ndarray, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The 4x4x4 coefficients around fractional voxel indices ``u`` (k, 3): their flat
+    indices (k, 64), clipped to the grid, and the offsets within the cell (k, 3)."""
+    fl = np.floor(u)
+    base = fl.astype(np.int64) - 1
+    offsets = np.arange(4)
+    ix, iy, iz = (np.clip(base[:, a, None] + offsets, 0, shape[a] - 1) for a in range(3))
+    lin = (ix[:, :, None, None] * shape[1] + iy[:, None, :, None]) * shape[2] + iz[:, None, None, :]
+    return lin.reshape(len(u), 64), u - fl
+
+
+def _bspline_weights(t: np.ndarray) -> np.ndarray:
+    """The cubic B-spline's four weights per axis at offsets ``t`` (k, 3): (k, 3, 4)."""
+    t2, t3 = t * t, t * t * t
+    return np.stack([(1 - t) ** 3, 3 * t3 - 6 * t2 + 4, -3 * t3 + 3 * t2 + 3 * t + 1, t3], axis=-1) / 6.0
+
+
 def bspline_eval(coeffs: list[np.ndarray], points_grid: np.ndarray, *, chunk: int = 65536) -> np.ndarray:
     """Evaluate cubic B-splines (given by coefficient grids) at points in voxel-index units.
 
@@ -133,23 +150,13 @@ def bspline_eval(coeffs: list[np.ndarray], points_grid: np.ndarray, *, chunk: in
     -------
     (n, m) float64
     """
-    shape = coeffs[0].shape
     flat = [c.ravel() for c in coeffs]
     n = len(points_grid)
     out = np.empty((n, len(coeffs)), np.float64)
-    offsets = np.arange(4)
     for s in range(0, n, chunk):
         u = points_grid[s : s + chunk]
-        fl = np.floor(u)
-        base = fl.astype(np.int64) - 1
-        t = u - fl
-        t2, t3 = t * t, t * t * t
-        w = np.stack([(1 - t) ** 3, 3 * t3 - 6 * t2 + 4, -3 * t3 + 3 * t2 + 3 * t + 1, t3], axis=-1) / 6.0
-        ix = np.clip(base[:, 0, None] + offsets, 0, shape[0] - 1)
-        iy = np.clip(base[:, 1, None] + offsets, 0, shape[1] - 1)
-        iz = np.clip(base[:, 2, None] + offsets, 0, shape[2] - 1)
-        lin = ((ix[:, :, None, None] * shape[1] + iy[:, None, :, None]) * shape[2] + iz[:, None, None, :])
-        lin = lin.reshape(len(u), 64)
+        lin, t = _stencil(u, coeffs[0].shape)
+        w = _bspline_weights(t)
         wt = (w[:, 0, :, None, None] * w[:, 1, None, :, None] * w[:, 2, None, None, :]).reshape(len(u), 64)
         for j, f in enumerate(flat):
             out[s : s + chunk, j] = np.einsum("ij,ij->i", f[lin], wt)
@@ -168,24 +175,16 @@ def bspline_gradient(coeff: np.ndarray, points_grid: np.ndarray, *, chunk: int =
     -------
     (n, 3) float64: d/du_x, d/du_y, d/du_z (divide by the spacing for length units)
     """
-    shape = coeff.shape
     flat = coeff.ravel()
     n = len(points_grid)
     out = np.empty((n, 3), np.float64)
-    offsets = np.arange(4)
     for s in range(0, n, chunk):
         u = points_grid[s : s + chunk]
-        fl = np.floor(u)
-        base = fl.astype(np.int64) - 1
-        t = u - fl
-        t2, t3 = t * t, t * t * t
-        w = np.stack([(1 - t) ** 3, 3 * t3 - 6 * t2 + 4, -3 * t3 + 3 * t2 + 3 * t + 1, t3], axis=-1) / 6.0
+        lin, t = _stencil(u, coeff.shape)
+        w = _bspline_weights(t)
+        t2 = t * t
         dw = np.stack([-3 * (1 - t) ** 2, 9 * t2 - 12 * t, -9 * t2 + 6 * t + 3, 3 * t2], axis=-1) / 6.0
-        ix = np.clip(base[:, 0, None] + offsets, 0, shape[0] - 1)
-        iy = np.clip(base[:, 1, None] + offsets, 0, shape[1] - 1)
-        iz = np.clip(base[:, 2, None] + offsets, 0, shape[2] - 1)
-        lin = ((ix[:, :, None, None] * shape[1] + iy[:, None, :, None]) * shape[2] + iz[:, None, None, :])
-        vals = flat[lin.reshape(len(u), 64)]
+        vals = flat[lin]
         for a in range(3):
             wa = [dw[:, i] if i == a else w[:, i] for i in range(3)]
             wt = (wa[0][:, :, None, None] * wa[1][:, None, :, None] * wa[2][:, None, None, :]).reshape(len(u), 64)

@@ -337,7 +337,7 @@ def _level_integrals(
 
 
 def _volume_integrals(
-    scene, vertices: np.ndarray, faces: np.ndarray, solid: bool, radii: np.ndarray, points: np.ndarray,
+    scene, vertices: np.ndarray, faces: np.ndarray, winding, radii: np.ndarray, points: np.ndarray,
     params: DescriptorParams, timings: dict,
 ) -> dict[str, np.ndarray]:
     """V_r, P_r, SA_r, the area vectors (and, with ``params.principal``, the covariance
@@ -349,7 +349,8 @@ def _volume_integrals(
     ----------
     scene : ray-casting scene of the mesh (:func:`geometry.make_scene`)
     vertices : (v, 3) float64, faces : (f, 3) int64
-    solid : the mesh is a closed solid (ray parity) rather than any surface (winding number)
+    winding : None for a closed solid (inside by ray parity), else the surface's
+        :class:`repair.WindingNumber` (inside where it exceeds 1/2)
     radii : (m,) kernel radii
     points : (n, 3) query points
     params : DescriptorParams
@@ -365,11 +366,6 @@ def _volume_integrals(
     out: dict[str, np.ndarray] = {}
     r_min = radii.min()
     level = np.floor(np.log2(radii / r_min) + 1e-9).astype(int)
-    winding = None
-    if not solid:
-        from ..repair import WindingNumber
-
-        winding = WindingNumber(vertices, faces)  # one hierarchy for every grid
     for lev in np.unique(level):
         idx = np.flatnonzero(level == lev)
         h = r_min * 2.0**lev / params.resolution
@@ -379,7 +375,7 @@ def _volume_integrals(
         grid = make_grid(bbox_min, bbox_max, h=h, margin=0.5 * radii[idx].max() + 4 * h)
         _check_grid(grid, params.max_memory, f"radius {radii[idx].max():g}")
         t = time.perf_counter()
-        if solid:
+        if winding is None:
             occ = occupancy(scene, grid, width=params.antialias)
         else:
             occ = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding)
@@ -397,7 +393,7 @@ def _volume_integrals(
 
 
 def _distance_integrals(
-    scene, vertices: np.ndarray, faces: np.ndarray, solid: bool, radii: np.ndarray, points: np.ndarray,
+    scene, vertices: np.ndarray, faces: np.ndarray, winding, radii: np.ndarray, points: np.ndarray,
     params: DescriptorParams, timings: dict,
 ) -> dict[str, np.ndarray]:
     """D2_r, SD2_r and D_r at the points: the squared distance to the surface integrated over
@@ -405,7 +401,7 @@ def _distance_integrals(
 
     Parameters
     ----------
-    scene, vertices, faces, solid, radii, points, params, timings : as in :func:`_volume_integrals`
+    scene, vertices, faces, winding, radii, points, params, timings : as in :func:`_volume_integrals`
 
     Returns
     -------
@@ -428,7 +424,6 @@ def _distance_integrals(
     t = time.perf_counter()
     distance = MeshDistance(vertices, faces)  # one face adjacency for every radius
     _add_time(timings, "distance", t)
-    winding = None
     for i, r in enumerate(radii):
         h = r / params.d2_resolution
         # exact d^2 wherever the spline of the samples can reach inside the ball, then a
@@ -450,13 +445,9 @@ def _distance_integrals(
         out["SD2"][:, i] = values[:, 1] + far * 4.0 * np.pi * r**2
         _add_time(timings, "d2_fft", t)
         t = time.perf_counter()
-        if solid:
+        if winding is None:
             inside = inside_centres(scene, grid)
         else:
-            if winding is None:
-                from ..repair import WindingNumber
-
-                winding = WindingNumber(vertices, faces)
             inside = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding) > 0.5
         spectrum = rfftn(signed_distance(near, inside, r=exact, band=band), workers=-1)
         del inside, near
@@ -468,7 +459,6 @@ def _distance_integrals(
 
 
 def integral_invariants(
-
     vertices: np.ndarray,
     faces: np.ndarray,
     radii,
@@ -503,13 +493,17 @@ def integral_invariants(
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     scene = make_scene(vertices, faces)
-    solid = is_closed_solid(faces)  # else: an open or non-manifold surface (repair.repair_surface)
+    winding = None
+    if not is_closed_solid(faces):  # an open or non-manifold surface (repair.repair_surface)
+        from ..repair import WindingNumber
+
+        winding = WindingNumber(vertices, faces)  # one hierarchy for every grid of both stages
     timings["bvh"] = time.perf_counter() - t0
 
-    vol = _volume_integrals(scene, vertices, faces, solid, radii, points, params, timings)
+    vol = _volume_integrals(scene, vertices, faces, winding, radii, points, params, timings)
     nan = np.full((len(points), len(radii)), np.nan)
     if params.with_d2:
-        dist = _distance_integrals(scene, vertices, faces, solid, radii, points, params, timings)
+        dist = _distance_integrals(scene, vertices, faces, winding, radii, points, params, timings)
     else:
         dist = {"D2": nan, "SD2": nan.copy(), "D": nan.copy()}
 

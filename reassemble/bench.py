@@ -577,7 +577,9 @@ def _cluster(*, jobs: int, scheduler: str | None, memory_limit):
     if not log.isEnabledFor(logging.INFO):  # the scheduler of a local cluster logs in this process
         logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler:
-        return Client(scheduler), None
+        from .parallel import connect
+
+        return connect(scheduler), None
     # the scheduler serves HTTP even without its dashboard, on 8787 by default: a port another cluster
     # on the machine may hold (then Dask warns and takes another); ":0" takes a free one at once
     with dask.config.set({"distributed.worker.daemon": False, "distributed.scheduler.allowed-failures": 1,

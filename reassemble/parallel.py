@@ -47,17 +47,25 @@ def pool_map(fn, tasks, *, jobs: int, initializer=None, initargs=(), scheduler: 
         yield from pool.map(fn, tasks, chunksize=max(1, len(tasks) // (8 * jobs)))
 
 
+def connect(scheduler: str):
+    """A new Dask client of the cluster at ``scheduler``; ReassembleError, one line, when the
+    address is malformed or nobody answers there."""
+    from distributed import Client
+    from distributed.comm.addressing import get_address_host_port
+
+    from .errors import ReassembleError, first_line
+
+    try:
+        get_address_host_port(scheduler)  # first: a client made of a bad address complains again at exit
+        return Client(scheduler, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ReassembleError(f"cannot reach the Dask scheduler at {scheduler}: {first_line(exc)}") from None
+
+
 def client(scheduler: str):
     """The Dask client of this process for the cluster at ``scheduler`` (made once, kept)."""
     if scheduler not in _clients:
-        from distributed import Client
-
-        from .errors import ReassembleError, first_line
-
-        try:
-            _clients[scheduler] = Client(scheduler, set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise ReassembleError(f"cannot reach the Dask scheduler at {scheduler}: {first_line(exc)}") from None
+        _clients[scheduler] = connect(scheduler)
     return _clients[scheduler]
 
 

@@ -178,7 +178,7 @@ def test_describe_bad_input(tmp_path):
     assert_one_line_error(rc, err, "sheet.stl", "no inside")
     rc, _, err = call("describe", "torus", "--radii", "-1", "--out", tmp_path / "o.npz")
     assert_one_line_error(rc, err, "positive")
-    rc, _, err = call("describe", "torus", "--radii", "1e-4", "--out", tmp_path / "o.npz", "--max-memory", "1G")
+    rc, _, err = call("describe", "torus", "--radii", "1e-4", "--out", tmp_path / "o.npz", "--max-memory", "1M")
     assert_one_line_error(rc, err, "--max-memory")
     assert not (tmp_path / "o.npz").exists()
     _open_box(tmp_path / "open.stl")  # an open scan: described as it is, its hole bridged

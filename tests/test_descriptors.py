@@ -123,7 +123,7 @@ def test_bad_radii_and_memory_are_named():
     with pytest.raises(ReassembleError, match="larger than the object"):
         integral_invariants(V, F, [10.0])
     with pytest.raises(ReassembleError, match="--max-memory"):
-        integral_invariants(V, F, [0.001], params=DescriptorParams(max_memory=1e8))
+        integral_invariants(V, F, [0.001], params=DescriptorParams(max_memory=1e6))
 
 
 def test_descriptors_are_deterministic():

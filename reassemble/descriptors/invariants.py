@@ -48,6 +48,7 @@ from .kernels import (
     sphere_spectrum,
     spline_integration,
 )
+from .tiles import DISTANCE_PAD, plan_tiles
 from .voxelize import (
     Grid,
     distance_band,
@@ -62,8 +63,6 @@ from .voxelize import (
 )
 
 log = logging.getLogger(__name__)
-
-BYTES_PER_VOXEL = 48  # peak working memory per voxel of the largest grid, measured
 
 
 @dataclass(frozen=True)
@@ -81,7 +80,9 @@ class DescriptorParams:
     sphere_area : compute SA_r and H_SA (one more inverse FFT per radius)
     principal : also principal curvatures and directions from the covariance of ball ∩ solid
         (nine more convolutions per radius)
-    max_memory : bytes of working memory allowed for one grid
+    max_memory : bytes of working memory allowed for one grid; a larger grid is cut into
+        tiles convolved one at a time (:func:`tiles.plan_tiles`), the same values to float
+        rounding
     """
 
     resolution: float = 8.0
@@ -215,17 +216,14 @@ def principal_from_moments(V: np.ndarray, m: np.ndarray, M: np.ndarray, r) -> tu
     return diff * diff, vec[:, :, 1], normal
 
 
-def _human(nbytes: float) -> str:
-    return f"{nbytes / 1e9:.1f} GB" if nbytes >= 1e8 else f"{nbytes / 1e6:.0f} MB"
-
-
-def _check_grid(grid: Grid, max_memory: float, what: str) -> None:
-    need = grid.size * BYTES_PER_VOXEL
-    if need > max_memory:
-        raise ReassembleError(
-            f"{what}: a {grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} grid needs about "
-            f"{_human(need)} (limit {_human(max_memory)}): raise --max-memory if the machine has it"
-        )
+def _put(out: dict, key: str, rows, cols: np.ndarray, value: np.ndarray, shape: tuple[int, int]) -> None:
+    """``out[key][rows, cols] = value`` (value (k, len(cols), ...)), the array made on first use."""
+    if key not in out:
+        out[key] = np.empty(shape + value.shape[2:])
+    if isinstance(rows, slice):
+        out[key][rows, cols] = value
+    else:
+        out[key][rows[:, None], cols] = value
 
 
 def _spectral_factor(grid: Grid) -> np.ndarray:
@@ -373,22 +371,26 @@ def _volume_integrals(
         # margin on the other side, which is empty when margin > r/2; plus the ramp and
         # the spline stencil
         grid = make_grid(bbox_min, bbox_max, h=h, margin=0.5 * radii[idx].max() + 4 * h)
-        _check_grid(grid, params.max_memory, f"radius {radii[idx].max():g}")
-        t = time.perf_counter()
-        if winding is None:
-            occ = occupancy(scene, grid, width=params.antialias)
-        else:
-            occ = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding)
-        _add_time(timings, "voxelize", t)
-        t = time.perf_counter()
-        spectrum = rfftn(occ, workers=-1)
-        del occ
-        for key, value in _level_integrals(spectrum, grid, radii[idx], points, params).items():
-            if key not in out:
-                out[key] = np.empty((len(points), len(radii)) + value.shape[2:])
-            out[key][:, idx] = value
-        _add_time(timings, "volume_fft", t)
-        log.info("V, P for r = %s on a %s grid (h = %.3g)", radii[idx].round(6).tolist(), grid.shape, h)
+        tiles = plan_tiles(grid, points, reach=int(np.ceil(radii[idx].max() / h)) + 2,
+                           max_memory=params.max_memory, what=f"radius {radii[idx].max():g}")
+        start = None if tiles[0][0] is grid else bbox_min - h  # a tile may begin inside the solid
+        for tile, rows in tiles:
+            t = time.perf_counter()
+            if winding is None:
+                occ = occupancy(scene, tile, width=params.antialias, ray_start=start)
+            else:
+                occ = winding_occupancy(scene, vertices, faces, tile, width=params.antialias, winding=winding,
+                                        ray_start=start)
+            _add_time(timings, "voxelize", t)
+            t = time.perf_counter()
+            spectrum = rfftn(occ, workers=-1)
+            del occ
+            for key, value in _level_integrals(spectrum, tile, radii[idx], points[rows], params).items():
+                _put(out, key, rows, idx, value, (len(points), len(radii)))
+            del spectrum
+            _add_time(timings, "volume_fft", t)
+        log.info("V, P for r = %s on a %s grid (h = %.3g)%s", radii[idx].round(6).tolist(), grid.shape, h,
+                 f" in {len(tiles)} tiles of {tiles[0][0].shape}" if len(tiles) > 1 else "")
     return out
 
 
@@ -415,8 +417,6 @@ def _distance_integrals(
     points in a ball about a surface point lie within r of the surface, so beyond the band it
     is rolled off to ±c (:func:`voxelize.saturated_signed`) without changing D_r.
     """
-    from scipy.fft import rfftn
-
     from .closest import MeshDistance
 
     bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
@@ -430,31 +430,70 @@ def _distance_integrals(
         # smooth roll-off (a kink would ring into every ball)
         exact, band = r + h, r + 5 * h  # measured: a shorter roll-off rings more
         grid = make_grid(bbox_min, bbox_max, h=h, margin=band + 2 * h)
-        _check_grid(grid, params.max_memory, f"D2 at radius {r:g}")
-        t = time.perf_counter()
-        near = distance_band(distance, scene, grid, r=exact, band=band)
-        sq = squared_distance(distance, scene, grid, r=exact, band=band, near=near)
-        _add_time(timings, "distance", t)
-        t = time.perf_counter()
-        spectrum = rfftn(sq, workers=-1)
-        del sq
-        far = float(saturated_square(np.array(band), exact, band))
-        ball, sphere = radial_on_grid(lambda k, r: (ball_spectrum(k, r), sphere_spectrum(k, r)), grid.shape, grid.h, r)
-        values = _convolve_at(spectrum, [ball, sphere], grid, points)
-        out["D2"][:, i] = values[:, 0] + far * 4.0 * np.pi * r**3 / 3.0
-        out["SD2"][:, i] = values[:, 1] + far * 4.0 * np.pi * r**2
-        _add_time(timings, "d2_fft", t)
-        t = time.perf_counter()
-        if winding is None:
-            inside = inside_centres(scene, grid)
-        else:
-            inside = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding) > 0.5
-        spectrum = rfftn(signed_distance(near, inside, r=exact, band=band), workers=-1)
-        del inside, near
-        (ball,) = radial_on_grid(lambda k, r: (ball_spectrum(k, r),), grid.shape, grid.h, r)
-        c = float(saturated_signed(np.array(band), exact, band))
-        out["D"][:, i] = _convolve_at(spectrum, [ball], grid, points)[:, 0] + c * 4.0 * np.pi * r**3 / 3.0
-        _add_time(timings, "d_fft", t)
+        # a tile's samples are those of the whole grid where the surface within the band
+        # of them lies in the tile: its padding covers the band too
+        tiles = plan_tiles(grid, points, reach=int(np.ceil(r / h)) + 2, pad=max(DISTANCE_PAD, int(np.ceil(band / h)) + 2),
+                           max_memory=params.max_memory, what=f"D2 at radius {r:g}")
+        start = None if tiles[0][0] is grid else bbox_min - h
+        for tile, rows in tiles:
+            values = _distance_tile(scene, vertices, faces, winding, distance, tile, r, points[rows], params,
+                                    timings, ray_start=start)
+            for key, value in values.items():
+                out[key][rows, i] = value
+        if len(tiles) > 1:
+            log.info("D2 for r = %.6g on a %s grid in %d tiles of %s", r, grid.shape, len(tiles), tiles[0][0].shape)
+    return out
+
+
+def _distance_tile(
+    scene, vertices: np.ndarray, faces: np.ndarray, winding, distance, grid: Grid, r: float, points: np.ndarray,
+    params: DescriptorParams, timings: dict, *, ray_start: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """D2_r, SD2_r and D_r of one radius at the points, from one grid (the whole one, or a tile).
+
+    Parameters
+    ----------
+    scene, vertices, faces, winding, params, timings : as in :func:`_volume_integrals`
+    distance : :class:`closest.MeshDistance` of the surface
+    grid : Grid of spacing ``r / params.d2_resolution``
+    r : radius
+    points : (n, 3) query points, inside the grid's reach
+    ray_start : as :func:`voxelize.inside_centres`
+
+    Returns
+    -------
+    D2, SD2, D : (n,)
+    """
+    from scipy.fft import rfftn
+
+    h = grid.h
+    exact, band = r + h, r + 5 * h
+    out = {}
+    t = time.perf_counter()
+    near = distance_band(distance, scene, grid, r=exact, band=band)
+    sq = squared_distance(distance, scene, grid, r=exact, band=band, near=near)
+    _add_time(timings, "distance", t)
+    t = time.perf_counter()
+    spectrum = rfftn(sq, workers=-1)
+    del sq
+    far = float(saturated_square(np.array(band), exact, band))
+    ball, sphere = radial_on_grid(lambda k, r: (ball_spectrum(k, r), sphere_spectrum(k, r)), grid.shape, grid.h, r)
+    values = _convolve_at(spectrum, [ball, sphere], grid, points)
+    out["D2"] = values[:, 0] + far * 4.0 * np.pi * r**3 / 3.0
+    out["SD2"] = values[:, 1] + far * 4.0 * np.pi * r**2
+    _add_time(timings, "d2_fft", t)
+    t = time.perf_counter()
+    if winding is None:
+        inside = inside_centres(scene, grid, ray_start=ray_start)
+    else:
+        inside = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding,
+                                   ray_start=ray_start) > 0.5
+    spectrum = rfftn(signed_distance(near, inside, r=exact, band=band), workers=-1)
+    del inside, near
+    (ball,) = radial_on_grid(lambda k, r: (ball_spectrum(k, r),), grid.shape, grid.h, r)
+    c = float(saturated_signed(np.array(band), exact, band))
+    out["D"] = _convolve_at(spectrum, [ball], grid, points)[:, 0] + c * 4.0 * np.pi * r**3 / 3.0
+    _add_time(timings, "d_fft", t)
     return out
 
 

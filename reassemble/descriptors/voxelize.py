@@ -53,11 +53,13 @@ def make_grid(bbox_min: np.ndarray, bbox_max: np.ndarray, *, h: float, margin: f
     return Grid(origin=origin, h=float(h), shape=shape)
 
 
-def inside_centres(scene, grid: Grid) -> np.ndarray:
+def inside_centres(scene, grid: Grid, *, ray_start: np.ndarray | None = None) -> np.ndarray:
     """Whether each voxel centre is inside the closed mesh: ray parity, one ray per column.
 
     Rays run along z; columns where the ray meets the surface an odd number of times
-    (it grazed an edge) are decided by rays along x instead, then y.
+    (it grazed an edge) are decided by rays along x instead, then y. They start a voxel
+    before the grid, or at ``ray_start`` (3,) where that is lower: a grid that is a tile
+    of a larger one may begin inside the solid, and parity counts from outside.
     """
     import open3d as o3d
 
@@ -66,7 +68,7 @@ def inside_centres(scene, grid: Grid) -> np.ndarray:
     for axis in (2, 0, 1):
         a, b = [i for i in range(3) if i != axis]
         ua, ub = np.meshgrid(grid.axis(a), grid.axis(b), indexing="ij")
-        start = grid.origin[axis] - grid.h
+        start = _ray_start(grid, axis, ray_start)
         rays = np.zeros((ua.size, 6), np.float32)
         rays[:, a], rays[:, b], rays[:, axis] = ua.ravel(), ub.ravel(), start
         rays[:, 3 + axis] = 1.0
@@ -109,6 +111,12 @@ def inside_centres(scene, grid: Grid) -> np.ndarray:
     return inside
 
 
+def _ray_start(grid: Grid, axis: int, ray_start: np.ndarray | None) -> float:
+    """Where rays along ``axis`` start: a voxel before the grid, or ``ray_start[axis]`` if lower."""
+    start = grid.origin[axis] - grid.h
+    return start if ray_start is None else min(start, float(ray_start[axis]))
+
+
 def _either_side(changes: list[np.ndarray]) -> np.ndarray:
     """(nx, ny, nz) bool: the voxels on either side of a change between neighbours.
 
@@ -129,14 +137,14 @@ def _either_side(changes: list[np.ndarray]) -> np.ndarray:
     return boundary
 
 
-def occupancy(scene, grid: Grid, *, width: float = 2.0) -> np.ndarray:
+def occupancy(scene, grid: Grid, *, width: float = 2.0, ray_start: np.ndarray | None = None) -> np.ndarray:
     """Anti-aliased occupancy ``clip(0.5 - sdf / (width h), 0, 1)`` of a closed mesh.
 
     Exact distances are computed only for voxels near the surface (where the value is
     fractional); the sign comes from ray parity. This equals the mean, over offsets
     t uniform in [-w/2, w/2], of the indicator of the solid grown by t: a symmetric
     smoothing whose small curvature bias (variance w^2/12) is removed analytically
-    downstream.
+    downstream. ``ray_start``: as :func:`inside_centres`.
 
     Returns
     -------
@@ -144,7 +152,7 @@ def occupancy(scene, grid: Grid, *, width: float = 2.0) -> np.ndarray:
     """
     from scipy.ndimage import binary_dilation
 
-    inside = inside_centres(scene, grid)
+    inside = inside_centres(scene, grid, ray_start=ray_start)
     boundary = _either_side([np.diff(inside, axis=axis) for axis in range(3)])
     # boundary voxels lie within one step of the surface; the ramp reaches width/2 beyond
     band = binary_dilation(boundary, iterations=max(1, int(np.ceil(width / 2))))
@@ -157,14 +165,15 @@ def occupancy(scene, grid: Grid, *, width: float = 2.0) -> np.ndarray:
 
 
 def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid, *,
-                      width: float = 2.0, winding=None) -> np.ndarray:
+                      width: float = 2.0, winding=None, ray_start: np.ndarray | None = None) -> np.ndarray:
     """Anti-aliased occupancy of any triangle set, from its generalized winding number.
 
     The same ramp as :func:`occupancy`, ``clip(0.5 - sdf / (width h), 0, 1)``, with the
     distance to the triangles and the side from the winding number ``w`` (inside where
     ``w >= 1/2``); beyond the ramp, ``clip(w, 0, 1)``: 1 where shells overlap, a smooth
     transition across holes. ``winding``: the set's :class:`repair.WindingNumber`, when the
-    caller evaluates several grids of it (built here otherwise).
+    caller evaluates several grids of it (built here otherwise). ``ray_start``: where the
+    column rays start, as :func:`inside_centres` (the running sum counts from there).
 
     Notes
     -----
@@ -191,7 +200,7 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     vertices = np.asarray(vertices, np.float64)
     winding = winding or WindingNumber(vertices, faces)
     nx, ny, nz = grid.shape
-    ray_ids, k, sign = _column_crossings(scene, vertices, faces, grid)
+    ray_ids, k, sign = _column_crossings(scene, vertices, faces, grid, ray_start=ray_start)
     diff = np.zeros((nx * ny, nz + 1), np.int16)  # |w| <= the faces a column crosses
     np.add.at(diff, (ray_ids, k), sign)
     w = np.cumsum(diff[:, :nz], axis=1, dtype=np.int16).astype(np.float32)  # (columns, nz)
@@ -219,8 +228,8 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     return occ.reshape(grid.shape)
 
 
-def _column_crossings(scene, vertices: np.ndarray, faces: np.ndarray,
-                      grid: Grid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _column_crossings(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid, *,
+                      ray_start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where one ray per grid column (along z) crosses the triangles, and which way.
 
     Parameters
@@ -228,6 +237,7 @@ def _column_crossings(scene, vertices: np.ndarray, faces: np.ndarray,
     scene : ray-casting scene of the triangles
     vertices : (n, 3) float64, faces : (m, 3) int
     grid : Grid
+    ray_start : (3,) or None, as :func:`inside_centres`
 
     Returns
     -------
@@ -238,7 +248,7 @@ def _column_crossings(scene, vertices: np.ndarray, faces: np.ndarray,
     import open3d as o3d
 
     ua, ub = np.meshgrid(grid.axis(0), grid.axis(1), indexing="ij")
-    start = grid.origin[2] - grid.h
+    start = _ray_start(grid, 2, ray_start)
     rays = np.zeros((ua.size, 6), np.float32)
     rays[:, 0], rays[:, 1], rays[:, 2], rays[:, 5] = ua.ravel(), ub.ravel(), start, 1.0
     hits = scene.list_intersections(o3d.core.Tensor(rays))

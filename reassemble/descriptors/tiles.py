@@ -1,0 +1,132 @@
+"""Box tiling of a convolution grid that would exceed the memory limit (Pottmann et al. 2009, Section 9.1).
+
+The query points are covered by boxes of ``b`` voxels per side (the cores), each padded by
+what a value read in it depends on: the kernel radius, the support of the cubic spline the
+kernel integrates, the reading stencil, and ``PAD`` more voxels for the recursive spline
+prefilters, whose influence decays by 0.268 a voxel. Each padded box is a grid of its own,
+on the lattice of the whole grid, convolved independently; each query point is read from
+the box whose core holds it.
+
+The samples of a tile are those of the whole grid, but the values differ by more than
+rounding: the kernels are continuous spectra cut at the grid's Nyquist frequency, whose
+spatial counterparts have tails falling off as 1/d^2 along the axes, and a tile sees what
+lies beyond its padding through them no more. Measured on a cylinder 20 diameters long
+(``tests/test_descriptors_tiles.py``): V, P, SA and the area vector move by 1e-5 to 7e-5
+of their largest value, as much as the untiled grid's own values move when 12 empty voxels
+are added to its margin; D2, D and SD2 by up to 1e-4 (``DISTANCE_PAD``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ReassembleError
+from .voxelize import Grid
+
+BYTES_PER_VOXEL = 48  # peak working memory per voxel of the largest grid, measured
+PAD = 16  # voxels beyond a value's support: 0.268^16 = 7e-10 of the prefilter's reach left
+# ... and for the distance grids, whose fields are larger against their integrals (|d^2 -
+# far| ~ 2.6 r^2 deep inside, D2 ~ 0.8 r^5): the kernels' 1/d^2 tails, cut at the padding,
+# moved D2 by 9e-5 of its largest value with 16, 2.5e-5 with 32 (a cylinder, r/h = 4)
+DISTANCE_PAD = 32
+STENCIL = 4  # the cubic spline's reading stencil spans 4 nodes: a core of b voxels needs b + 4
+COUNT_SAMPLE = 100_000  # query points used to count the occupied tiles of a candidate size
+
+
+def human(nbytes: float) -> str:
+    """``nbytes`` as "1.2 GB" or "35 MB"."""
+    return f"{nbytes / 1e9:.1f} GB" if nbytes >= 1e8 else f"{nbytes / 1e6:.0f} MB"
+
+
+def _shape_text(shape) -> str:
+    return "x".join(str(int(n)) for n in shape)
+
+
+def _cells(u: np.ndarray, b: int, tiled: np.ndarray) -> np.ndarray:
+    """(n, 3) int64 index of the core holding each point (voxel units ``u``); 0 on untiled axes."""
+    cells = np.floor(u / b).astype(np.int64)
+    cells[:, ~tiled] = 0
+    return cells
+
+
+def _candidates(full: np.ndarray, reach: int, max_memory: float):
+    """(side, shape) of the tiles that fit, smallest first: ``side`` voxels on the axes longer
+    than it, the whole grid on the others."""
+    from scipy.fft import next_fast_len
+
+    n = int(next_fast_len(2 * reach + STENCIL + 1, real=True))
+    while True:
+        shape = np.minimum(n, full)
+        if np.prod(shape, dtype=np.float64) * BYTES_PER_VOXEL > max_memory:
+            return
+        yield n, shape
+        if n >= full.max():
+            return
+        n = int(next_fast_len(n + 1, real=True))
+
+
+def plan_tiles(grid: Grid, points: np.ndarray, *, reach: int, max_memory: float, what: str,
+               pad: int = PAD) -> list[tuple[Grid, np.ndarray | slice]]:
+    """The grids to convolve and the query points each is read at.
+
+    Parameters
+    ----------
+    grid : the whole grid (:func:`voxelize.make_grid`)
+    points : (n, 3) query points
+    reach : voxels from a reading stencil's nodes to the farthest sample their values
+        depend on (the kernel radius plus the spline's support)
+    max_memory : bytes allowed for one grid (``BYTES_PER_VOXEL`` a voxel)
+    what : the grid's name in the error message ("radius 0.1")
+    pad : voxels more on each side, at least ``PAD``
+
+    Returns
+    -------
+    list of (tile, rows): ``[(grid, slice(None))]`` when the grid fits; else tiles on the
+    grid's lattice and the (k,) int64 indices of the points each serves, every point once
+
+    Raises
+    ------
+    ReassembleError
+        when not even a tile with a one-voxel core fits
+
+    Notes
+    -----
+    Of the sizes that fit, the one of least estimated cost is taken: the occupied tiles
+    times ``N log N`` for N voxels a tile, the paper's model, whose optimum for boxes along
+    a surface is ``b = 2.28 r`` with a padding of r; here the padding is larger and the
+    count is that of the boxes the query points occupy.
+    """
+    if grid.size * BYTES_PER_VOXEL <= max_memory:
+        return [(grid, slice(None))]
+    full = np.array(grid.shape)
+    reach = int(reach) + max(int(pad), PAD)
+    u = (np.asarray(points, np.float64) - grid.origin) / grid.h
+    sample = u[:: max(1, len(u) // COUNT_SAMPLE)]
+    best = None
+    for side, shape in _candidates(full, reach, max_memory):
+        b, tiled = side - 2 * reach - STENCIL, full > side
+        count = len(np.unique(_cells(sample, b, tiled), axis=0))
+        voxels = float(np.prod(shape, dtype=np.float64))
+        cost = count * voxels * np.log(voxels)
+        if best is None or cost < best[0]:
+            best = (cost, b, tiled, shape)
+    if best is None:
+        from scipy.fft import next_fast_len
+
+        smallest = np.minimum(int(next_fast_len(2 * reach + STENCIL + 1, real=True)), full)
+        raise ReassembleError(
+            f"{what}: a {_shape_text(full)} grid needs about {human(grid.size * BYTES_PER_VOXEL)} and its "
+            f"smallest tile, {_shape_text(smallest)}, about {human(np.prod(smallest) * BYTES_PER_VOXEL)} "
+            f"(limit {human(max_memory)}): raise --max-memory if the machine has it"
+        )
+    _, b, tiled, shape = best
+    cells = _cells(u, b, tiled)
+    keys, inverse = np.unique(cells, axis=0, return_inverse=True)
+    order = np.argsort(inverse.ravel(), kind="stable")
+    bounds = np.searchsorted(inverse.ravel()[order], np.arange(len(keys) + 1))
+    tiles = []
+    for t, key in enumerate(keys):
+        first = np.where(tiled, key * b - reach - 1, 0)  # the core's stencil starts a node below it
+        tile = Grid(origin=grid.origin + grid.h * first, h=grid.h, shape=tuple(int(n) for n in shape))
+        tiles.append((tile, order[bounds[t]:bounds[t + 1]]))
+    return tiles

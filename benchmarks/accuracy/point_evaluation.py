@@ -1,6 +1,6 @@
 """Error of V_r (as mean curvature) read at exact surface points, against reading the nearest grid node.
 
-    python -m benchmarks.accuracy.point_evaluation     # about 2 min on 2 cores
+    python -m benchmarks.accuracy.point_evaluation     # about 1 min on 2 cores
 
 The convolved occupancy grid is read three ways, at r = 0.2 and r/h = 4 ... 16:
 

@@ -384,7 +384,7 @@ def _add_describe(sub) -> None:
             help="also principal curvatures k1, k2, K2_cov, directions dir1 and normals "
             "from the covariance of ball and solid (robust to noise, unlike K2 from D2)")
     _option(p, "--max-memory", "describe.max_memory", type=_bytes, defaults=descriptor, show=_size_text,
-            help="working memory allowed for one grid, e.g. 4G")
+            help="working memory allowed for one grid, e.g. 4G; a larger grid is computed in tiles (slower)")
     _add_fill_holes(p, dest="fill_holes")
     p.set_defaults(func=_cmd_describe)
 
@@ -427,8 +427,8 @@ def _add_inputs(p) -> None:
                    "pair (matches/)")
     _option(p, "--seed", "seed", type=_int_at_least(0), help="random seed")
     _option(p, "--max-memory", "describe.max_memory", type=_bytes, show=_size_text,
-            help="working memory one fragment's descriptor grid may take, e.g. 4G; a fragment that needs "
-            "more is left out with a note")
+            help="working memory one fragment's descriptor grid may take, e.g. 4G; larger grids are computed "
+            "in tiles, and a fragment for which even one tile needs more is left out with a note")
     _option(p, "--gap", "gap", type=_gap, show=_auto,
             help="how far apart mating fracture surfaces are (material lost at the break), a fraction of the "
             "median fragment's bounding-box diagonal; 'auto': measured from the pairs")

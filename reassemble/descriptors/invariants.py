@@ -48,7 +48,7 @@ from .kernels import (
     sphere_spectrum,
     spline_integration,
 )
-from .tiles import DISTANCE_PAD, plan_tiles
+from .tiles import DISTANCE_PAD, check_fits, plan_tiles, tile_offset
 from .voxelize import (
     Grid,
     distance_band,
@@ -334,6 +334,53 @@ def _level_integrals(
     return out
 
 
+def _volume_grids(vertices: np.ndarray, radii: np.ndarray, params: DescriptorParams,
+                  winding) -> list[tuple[np.ndarray, Grid, dict]]:
+    """The occupancy grids: per octave of ``r / h``, its radii (indices), its grid, and the
+    keywords of :func:`tiles.plan_tiles` for it."""
+    bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
+    r_min = radii.min()
+    level = np.floor(np.log2(radii / r_min) + 1e-9).astype(int)
+    out = []
+    for lev in np.unique(level):
+        idx = np.flatnonzero(level == lev)
+        h = r_min * 2.0**lev / params.resolution
+        # the FFT convolution is circular: a ball at the object's edge may wrap into the
+        # margin on the other side, which is empty when margin > r/2; plus the ramp and
+        # the spline stencil
+        grid = make_grid(bbox_min, bbox_max, h=h, margin=0.5 * radii[idx].max() + 4 * h)
+        tiling = {"reach": int(np.ceil(radii[idx].max() / h)) + 2, "tile_z": winding is None,
+                  "what": f"radius {radii[idx].max():g}"}
+        out.append((idx, grid, tiling))
+    return out
+
+
+def _distance_grid(vertices: np.ndarray, r: float, params: DescriptorParams, winding) -> tuple[Grid, dict]:
+    """The squared- and signed-distance grid of radius r, and the keywords of :func:`tiles.plan_tiles`.
+
+    Notes
+    -----
+    The distances are exact wherever the spline of the samples can reach inside the ball
+    (r + h), then rolled off smoothly to ``band`` (a kink would ring into every ball; a
+    shorter roll-off, measured, rings more). A tile's samples are those of the whole grid
+    where the surface within the band of them lies in the tile: its padding covers the band.
+    """
+    h = r / params.d2_resolution
+    band = r + 5 * h
+    grid = make_grid(vertices.min(axis=0), vertices.max(axis=0), h=h, margin=band + 2 * h)
+    return grid, {"reach": int(np.ceil(r / h)) + 2, "pad": max(DISTANCE_PAD, int(np.ceil(band / h)) + 2),
+                  "tile_z": winding is None, "what": f"D2 at radius {r:g}"}
+
+
+def _check_memory(vertices: np.ndarray, radii: np.ndarray, params: DescriptorParams, winding) -> None:
+    """Raise ReassembleError, before any work, if some grid does not fit ``params.max_memory`` even in tiles."""
+    grids = [(grid, tiling) for _, grid, tiling in _volume_grids(vertices, radii, params, winding)]
+    if params.with_d2:
+        grids += [_distance_grid(vertices, r, params, winding) for r in radii]
+    for grid, tiling in grids:
+        check_fits(grid, max_memory=params.max_memory, **tiling)
+
+
 def _volume_integrals(
     scene, vertices: np.ndarray, faces: np.ndarray, winding, radii: np.ndarray, points: np.ndarray,
     params: DescriptorParams, timings: dict,
@@ -360,27 +407,19 @@ def _volume_integrals(
     """
     from scipy.fft import rfftn
 
-    bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
     out: dict[str, np.ndarray] = {}
-    r_min = radii.min()
-    level = np.floor(np.log2(radii / r_min) + 1e-9).astype(int)
-    for lev in np.unique(level):
-        idx = np.flatnonzero(level == lev)
-        h = r_min * 2.0**lev / params.resolution
-        # the FFT convolution is circular: a ball at the object's edge may wrap into the
-        # margin on the other side, which is empty when margin > r/2; plus the ramp and
-        # the spline stencil
-        grid = make_grid(bbox_min, bbox_max, h=h, margin=0.5 * radii[idx].max() + 4 * h)
-        tiles = plan_tiles(grid, points, reach=int(np.ceil(radii[idx].max() / h)) + 2,
-                           max_memory=params.max_memory, what=f"radius {radii[idx].max():g}")
-        start = None if tiles[0][0] is grid else bbox_min - h  # a tile may begin inside the solid
+    for idx, grid, tiling in _volume_grids(vertices, radii, params, winding):
+        h = grid.h
+        tiles = plan_tiles(grid, points, max_memory=params.max_memory, **tiling)
+        start = None if tiles[0][0] is grid else vertices.min(axis=0) - h  # a tile may begin inside the solid
         for tile, rows in tiles:
             t = time.perf_counter()
             if winding is None:
                 occ = occupancy(scene, tile, width=params.antialias, ray_start=start)
             else:
+                frame = None if tile is grid else (tile_offset(tile, grid), grid.shape)
                 occ = winding_occupancy(scene, vertices, faces, tile, width=params.antialias, winding=winding,
-                                        ray_start=start)
+                                        ray_start=start, frame=frame)
             _add_time(timings, "voxelize", t)
             t = time.perf_counter()
             spectrum = rfftn(occ, workers=-1)
@@ -419,25 +458,18 @@ def _distance_integrals(
     """
     from .closest import MeshDistance
 
-    bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
     out = {key: np.full((len(points), len(radii)), np.nan) for key in ("D2", "SD2", "D")}
     t = time.perf_counter()
     distance = MeshDistance(vertices, faces)  # one face adjacency for every radius
     _add_time(timings, "distance", t)
     for i, r in enumerate(radii):
-        h = r / params.d2_resolution
-        # exact d^2 wherever the spline of the samples can reach inside the ball, then a
-        # smooth roll-off (a kink would ring into every ball)
-        exact, band = r + h, r + 5 * h  # measured: a shorter roll-off rings more
-        grid = make_grid(bbox_min, bbox_max, h=h, margin=band + 2 * h)
-        # a tile's samples are those of the whole grid where the surface within the band
-        # of them lies in the tile: its padding covers the band too
-        tiles = plan_tiles(grid, points, reach=int(np.ceil(r / h)) + 2, pad=max(DISTANCE_PAD, int(np.ceil(band / h)) + 2),
-                           max_memory=params.max_memory, what=f"D2 at radius {r:g}")
-        start = None if tiles[0][0] is grid else bbox_min - h
+        grid, tiling = _distance_grid(vertices, r, params, winding)
+        tiles = plan_tiles(grid, points, max_memory=params.max_memory, **tiling)
+        start = None if tiles[0][0] is grid else vertices.min(axis=0) - grid.h
         for tile, rows in tiles:
+            frame = None if tile is grid else (tile_offset(tile, grid), grid.shape)
             values = _distance_tile(scene, vertices, faces, winding, distance, tile, r, points[rows], params,
-                                    timings, ray_start=start)
+                                    timings, ray_start=start, frame=frame)
             for key, value in values.items():
                 out[key][rows, i] = value
         if len(tiles) > 1:
@@ -447,7 +479,7 @@ def _distance_integrals(
 
 def _distance_tile(
     scene, vertices: np.ndarray, faces: np.ndarray, winding, distance, grid: Grid, r: float, points: np.ndarray,
-    params: DescriptorParams, timings: dict, *, ray_start: np.ndarray | None = None,
+    params: DescriptorParams, timings: dict, *, ray_start: np.ndarray | None = None, frame=None,
 ) -> dict[str, np.ndarray]:
     """D2_r, SD2_r and D_r of one radius at the points, from one grid (the whole one, or a tile).
 
@@ -458,7 +490,7 @@ def _distance_tile(
     grid : Grid of spacing ``r / params.d2_resolution``
     r : radius
     points : (n, 3) query points, inside the grid's reach
-    ray_start : as :func:`voxelize.inside_centres`
+    ray_start : as :func:`voxelize.inside_centres`; frame : as :func:`voxelize.winding_occupancy`
 
     Returns
     -------
@@ -467,7 +499,7 @@ def _distance_tile(
     from scipy.fft import rfftn
 
     h = grid.h
-    exact, band = r + h, r + 5 * h
+    exact, band = r + h, r + 5 * h  # as _distance_grid
     out = {}
     t = time.perf_counter()
     near = distance_band(distance, scene, grid, r=exact, band=band)
@@ -487,7 +519,7 @@ def _distance_tile(
         inside = inside_centres(scene, grid, ray_start=ray_start)
     else:
         inside = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding,
-                                   ray_start=ray_start) > 0.5
+                                   ray_start=ray_start, frame=frame) > 0.5
     spectrum = rfftn(signed_distance(near, inside, r=exact, band=band), workers=-1)
     del inside, near
     (ball,) = radial_on_grid(lambda k, r: (ball_spectrum(k, r),), grid.shape, grid.h, r)
@@ -538,6 +570,7 @@ def integral_invariants(
 
         winding = WindingNumber(vertices, faces)  # one hierarchy for every grid of both stages
     timings["bvh"] = time.perf_counter() - t0
+    _check_memory(vertices, radii, params, winding)
 
     vol = _volume_integrals(scene, vertices, faces, winding, radii, points, params, timings)
     nan = np.full((len(points), len(radii)), np.nan)

@@ -165,7 +165,8 @@ def occupancy(scene, grid: Grid, *, width: float = 2.0, ray_start: np.ndarray | 
 
 
 def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid, *,
-                      width: float = 2.0, winding=None, ray_start: np.ndarray | None = None) -> np.ndarray:
+                      width: float = 2.0, winding=None, ray_start: np.ndarray | None = None,
+                      frame=None) -> np.ndarray:
     """Anti-aliased occupancy of any triangle set, from its generalized winding number.
 
     The same ramp as :func:`occupancy`, ``clip(0.5 - sdf / (width h), 0, 1)``, with the
@@ -174,6 +175,9 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     transition across holes. ``winding``: the set's :class:`repair.WindingNumber`, when the
     caller evaluates several grids of it (built here otherwise). ``ray_start``: where the
     column rays start, as :func:`inside_centres` (the running sum counts from there).
+    ``frame``: for a tile of a larger grid spanning all of its z, (offset (3,) int of the
+    tile in it, its shape): the columns checked are those the larger grid checks, so the
+    tile's values are the larger grid's but within ``COARSE`` voxels of its x and y sides.
 
     Notes
     -----
@@ -205,7 +209,7 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     np.add.at(diff, (ray_ids, k), sign)
     w = np.cumsum(diff[:, :nz], axis=1, dtype=np.int16).astype(np.float32)  # (columns, nz)
     suspect = np.bincount(ray_ids, sign, nx * ny) != 0
-    suspect |= _lattice_disagrees(w, grid, winding)
+    suspect |= _lattice_disagrees(w, grid, winding, frame)
     if suspect.any():
         _exact_columns(w, np.flatnonzero(suspect), ray_ids, k, grid, winding)
     w = w.reshape(grid.shape)
@@ -271,21 +275,35 @@ def _column_crossings(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     return ray_ids, k, sign
 
 
-def _lattice_disagrees(w: np.ndarray, grid: Grid, winding) -> np.ndarray:
+def _lattice(n: int, offset: int, frame: int) -> tuple[np.ndarray, np.ndarray]:
+    """The coarse lattice along one axis of ``n`` voxels that start at ``offset`` in a frame
+    of ``frame`` voxels: every ``COARSE``-th voxel of the frame and its last, in the axis's
+    indices (some outside ``[0, n)``), and which of them are inside."""
+    at = np.unique(np.r_[np.arange(0, frame, COARSE), frame - 1]) - offset
+    return at, (at >= 0) & (at < n)
+
+
+def _lattice_disagrees(w: np.ndarray, grid: Grid, winding, frame=None) -> np.ndarray:
     """(nx * ny,) bool: the columns near a point of the coarse lattice (every ``COARSE``
     voxels) where the running sum ``w`` (columns, nz) is off the exact winding number by
     more than ``LATTICE_TOL`` (what the running sum cannot see: through two holes, or
-    beside one)."""
+    beside one). ``frame``: (offset (3,) int, shape) of the grid this one is a tile of,
+    whose lattice is used, so that a tile flags the columns the whole grid does but within
+    ``COARSE`` voxels of its sides."""
     nx, ny, _ = grid.shape
-    ci, cj, ck = (np.unique(np.r_[np.arange(0, n, COARSE), n - 1]) for n in grid.shape)
+    offset, shape = frame if frame is not None else ((0, 0, 0), grid.shape)
+    (li, ini), (lj, inj), (lk, ink) = (_lattice(n, o, f) for n, o, f in zip(grid.shape, offset, shape))
+    ci, cj, ck = li[ini], lj[inj], lk[ink]
     I, J, K = np.meshgrid(ci, cj, ck, indexing="ij")
     wl = winding(grid.origin + grid.h * np.column_stack([I.ravel(), J.ravel(), K.ravel()]))
     bad = (np.abs(wl - w.reshape(grid.shape)[I.ravel(), J.ravel(), K.ravel()]) > LATTICE_TOL).reshape(I.shape)
     bad = bad.any(axis=2)
+    pi, pj = np.flatnonzero(ini), np.flatnonzero(inj)  # lattice positions of the evaluated points
     near = np.zeros((nx, ny), bool)  # the columns of every lattice cell with a bad corner
     for a, b in zip(*np.nonzero(bad)):
-        i0, i1 = ci[max(a - 1, 0)], ci[min(a + 1, len(ci) - 1)] + 1
-        j0, j1 = cj[max(b - 1, 0)], cj[min(b + 1, len(cj) - 1)] + 1
+        a, b = pi[a], pj[b]
+        i0, i1 = max(li[max(a - 1, 0)], 0), li[min(a + 1, len(li) - 1)] + 1
+        j0, j1 = max(lj[max(b - 1, 0)], 0), lj[min(b + 1, len(lj) - 1)] + 1
         near[i0:i1, j0:j1] = True
     return near.ravel()
 

@@ -114,8 +114,9 @@ def shape_section(shape: str, rng, n: int, r: float, resolutions, read_s: float,
     verts = v[rng.choice(len(v), n, replace=False)]
     t = time.perf_counter()
     ref_v, ref_p = exact_volume(shape, verts, r), exact_volume(shape, exact_pts, r)
+    ref_s = time.perf_counter() - t
     print(f"\n== {shape}: {len(v)} vertices, mean inward offset of the mesh δ = {delta:.2e} (H share 4 δ/r^2 = "
-          f"{4 * delta / r**2:.4f}); r = {r}; {n} vertices and {n} exact points; reference {time.perf_counter() - t:.1f} s")
+          f"{4 * delta / r**2:.4f}); r = {r}; {n} vertices and {n} exact points; reference {ref_s:.1f} s")
     print("  r/h   grid s   (a) vertices RMS  (b) exact points RMS   (c) nearest node RMS  (c) vs V at the node  "
           "read s/pt")
     rows = []

@@ -23,7 +23,9 @@ Each is a convolution of a grid (occupancy, or squared or signed distance) with 
 kernel (the ball, or the sphere for SA_r and SD2_r), done by FFT with the kernel's exact Fourier transform. Radii whose ``r / h`` falls in
 the same octave share one occupancy grid and its forward FFT. Results are read at the
 query points by cubic B-spline interpolation, whose prefilter is applied in the
-Fourier domain for free; the area vector is the gradient of V's spline.
+Fourier domain for free; the area vector is the gradient of V's spline. A grid larger
+than ``DescriptorParams.max_memory`` is convolved in boxes around the query points
+(:mod:`.tiles`, the paper's box tiling).
 """
 
 from __future__ import annotations

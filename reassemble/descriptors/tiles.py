@@ -20,6 +20,8 @@ where its scatter is 1.4.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from ..errors import ReassembleError
@@ -57,6 +59,13 @@ def _smallest(full: np.ndarray, reach: int, axes: np.ndarray) -> tuple[int, np.n
 
     side = int(next_fast_len(3 * reach + STENCIL, real=True))
     return side, np.where(axes, np.minimum(side, full), full)
+
+
+def _count(cells: np.ndarray) -> int:
+    """The number of distinct rows of (n, 3) int64 ``cells``."""
+    c = cells - cells.min(axis=0)
+    m = c.max(axis=0) + 1
+    return len(np.unique((c[:, 0] * m[1] + c[:, 1]) * m[2] + c[:, 2]))
 
 
 def _candidates(full: np.ndarray, reach: int, max_memory: float, axes: np.ndarray):
@@ -118,7 +127,8 @@ def plan_tiles(grid: Grid, points: np.ndarray, *, reach: int, max_memory: float,
 
     Notes
     -----
-    Of the sizes that fit, the one of least estimated cost is taken: the occupied tiles
+    Of the shapes that fit (``side`` voxels on the axes cut, the whole grid on the others,
+    for every choice of axes), the one of least estimated cost is taken: the occupied tiles
     times ``N log N`` for N voxels a tile, the paper's model, whose optimum for boxes along
     a surface is ``b = 2.28 r`` with a padding of r; here the padding is larger and the
     count is that of the boxes the query points occupy. A core narrower than the padding p
@@ -135,13 +145,16 @@ def plan_tiles(grid: Grid, points: np.ndarray, *, reach: int, max_memory: float,
     u = (np.asarray(points, np.float64) - grid.origin) / grid.h
     sample = u[:: max(1, len(u) // COUNT_SAMPLE)]
     best = None
-    for side, shape in _candidates(full, reach, max_memory, axes):
-        b, tiled = side - 2 * reach - STENCIL, axes & (full > side)
-        count = len(np.unique(_cells(sample, b, tiled), axis=0))
-        voxels = float(np.prod(shape, dtype=np.float64))
-        cost = count * voxels * np.log(voxels)
-        if best is None or cost < best[0]:
-            best = (cost, b, tiled, shape)
+    for cut in itertools.product(*[(True, False) if a else (False,) for a in axes]):  # which axes to cut
+        cut = np.array(cut)
+        if not cut.any():
+            continue
+        for side, shape in _candidates(full, reach, max_memory, cut):
+            b, tiled = side - 2 * reach - STENCIL, cut & (full > side)
+            voxels = float(np.prod(shape, dtype=np.float64))
+            cost = _count(_cells(sample, b, tiled)) * voxels * np.log(voxels)
+            if best is None or cost < best[0]:
+                best = (cost, b, tiled, shape)
     _, b, tiled, shape = best
     cells = _cells(u, b, tiled)
     keys, inverse = np.unique(cells, axis=0, return_inverse=True)

@@ -30,7 +30,8 @@ class _Plane:
 
 def relabel_planar_mates(
     meshes: list[tuple[np.ndarray, np.ndarray]], segmentations: list[Segmentation], *,
-    tol: float, min_area: float, min_overlap: float, samples: int = 20000, rng: np.random.Generator,
+    tol: float, min_area: float, min_overlap: float, samples: int = 20000, candidates: int = 16,
+    rng: np.random.Generator,
 ) -> tuple[list[Segmentation], list[int]]:
     """The segmentations with the planar mates of labelled planar break faces labelled fracture.
 
@@ -43,6 +44,8 @@ def relabel_planar_mates(
     min_overlap : the intersection over union of the two outlines, laid together, that
         makes a plane a mate
     samples : area-uniform surface samples per fragment
+    candidates : outlines compared per labelled face: those of the planes of other
+        fragments most alike in area and second moments
     rng : numpy Generator
 
     Returns
@@ -56,7 +59,11 @@ def relabel_planar_mates(
     area whose outline overlaps it most (:func:`planes.in_plane_alignments`). Only when
     that best mate is unlabelled, and overlaps by ``min_overlap``, are its faces labelled
     fracture: a face whose labelled mate fits better is left as it is, and two planes of
-    the original surface (a plate's two sides) are never compared.
+    the original surface (a plate's two sides) are never compared. A mate has the same area
+    and moments as the face, so only the ``candidates`` planes nearest in those (found in a
+    k-d tree over the whole set) have their outlines compared: the work grows with the
+    number of planes, not with its square, which matters with many similar faces
+    (Voronoi cells: every cell face is alike in size).
     """
     planes: list[_Plane] = []
     sample_areas = []
@@ -72,11 +79,11 @@ def relabel_planar_mates(
             for p in planar_patches(points[keep], normals[keep], sample_area, tol=tol, min_area=min_area, rng=rng):
                 planes.append(_Plane(k, labelled, p))
     best: dict[int, tuple[float, int]] = {}  # unlabelled plane -> (overlap, labelled plane)
-    for i, a in enumerate(planes):
-        if not a.labelled:
-            continue
-        mates = [(_outline_overlap(a.patch, b.patch, spacing=np.sqrt(max(sample_areas[a.fragment], sample_areas[b.fragment]))),
-                  j) for j, b in enumerate(planes) if b.fragment != a.fragment and _similar(a.patch, b.patch)]
+    for i, similar in _nearest_similar(planes, count=candidates):
+        a = planes[i]
+        mates = [(_outline_overlap(a.patch, planes[j].patch,
+                                   spacing=np.sqrt(max(sample_areas[a.fragment], sample_areas[planes[j].fragment]))), j)
+                 for j in similar]
         if not mates:
             continue
         overlap, j = max(mates)
@@ -97,6 +104,26 @@ def relabel_planar_mates(
         if k not in changed:
             changed.append(k)
     return out, sorted(changed)
+
+
+def _nearest_similar(planes: list[_Plane], *, count: int, ratio: float = 1.5):
+    """[(labelled plane, [planes])]: per labelled plane, the planes of other fragments
+    :func:`_similar` to it, at most ``count`` of them, nearest in log area and log spreads first."""
+    from scipy.spatial import cKDTree
+
+    if not planes:
+        return []
+    key = np.log(np.array([[p.patch.area, *p.patch.spread] for p in planes]).clip(1e-300))
+    tree = cKDTree(key)
+    out = []
+    for i, a in enumerate(planes):
+        if not a.labelled:
+            continue
+        near = tree.query_ball_point(key[i], r=np.log(ratio) + 1e-9, p=np.inf)
+        near = [j for j in near if planes[j].fragment != a.fragment and _similar(a.patch, planes[j].patch, ratio)]
+        near.sort(key=lambda j: (float(np.sum((key[j] - key[i]) ** 2)), j))
+        out.append((i, near[:count]))
+    return out
 
 
 def _similar(p: PlanarPatch, q: PlanarPatch, ratio: float = 1.5) -> bool:

@@ -74,3 +74,28 @@ def test_a_plane_that_does_not_match_the_outline_is_not_a_mate(halves):
     _, changed = relabel_planar_mates([(va, fa), (vb, fb)], segs, tol=0.005, min_area=0.1, min_overlap=0.9,
                                       rng=np.random.default_rng(0))
     assert changed == []
+
+
+def test_outlines_are_compared_only_with_the_nearest_similar_planes():
+    from reassemble.mates import _nearest_similar, _Plane, _similar
+    from reassemble.planes import PlanarPatch
+
+    rng = np.random.default_rng(0)
+
+    def plane(k, labelled):
+        area, spread = rng.uniform(1.0, 2.0), rng.uniform(0.5, 1.0, 2)
+        return _Plane(k % 7, labelled, PlanarPatch(np.zeros(3), np.array([0, 0, 1.0]), np.eye(3)[:2], spread, area,
+                                                   np.zeros((3, 2))))
+
+    planes = [plane(k, k % 3 == 0) for k in range(60)]
+    found = dict(_nearest_similar(planes, count=1000))
+    assert sorted(found) == [i for i, p in enumerate(planes) if p.labelled]
+    for i, near in found.items():  # uncapped: exactly the similar planes of other fragments
+        assert sorted(near) == [j for j, q in enumerate(planes)
+                                if q.fragment != planes[i].fragment and _similar(planes[i].patch, q.patch)]
+    capped = dict(_nearest_similar(planes, count=4))
+    for i, near in capped.items():  # capped: the nearest of them, nearest first
+        assert near == found[i][:4]
+        key = lambda j: np.log([planes[j].patch.area, *planes[j].patch.spread])
+        d = [np.sum((key(j) - key(i)) ** 2) for j in found[i]]
+        assert d == sorted(d)

@@ -56,6 +56,9 @@ CELLS_PER_FRAGMENT = 4  # cells in a fragment written with keep_cell_faces
 # up to this many cells, each is cut from what the earlier ones left (the data_synth sets,
 # 20 pieces at most, were made so); beyond, from the solid itself (_partition's Notes)
 SEQUENTIAL_CELLS = 20
+# a shell of the input under this share of its volume is a speck, dropped before breaking:
+# far below the smallest piece (min_volume / pieces, halved three times, at 200 pieces ~6e-5)
+SPECK_VOLUME = 1e-6
 
 
 @dataclass(frozen=True)
@@ -817,7 +820,7 @@ def break_mesh(
     solid = mf.Manifold(mf.Mesh64(vert_properties=np.ascontiguousarray(vertices), tri_verts=faces))
     if solid.status() != mf.Error.NoError or solid.is_empty():
         raise ReassembleError(f"mesh is not a valid solid for booleans ({solid.status().name})")
-    solid = solid.as_original()
+    solid = _without_specks(solid).as_original()
     object_id = solid.original_id()
     bbox_min, bbox_max = vertices.min(axis=0), vertices.max(axis=0)
     diag = float(np.linalg.norm(bbox_max - bbox_min))
@@ -854,6 +857,26 @@ def break_mesh(
              "interior_cuts": len(interior_ids)}
     log.info("broke into %d fragments with %d cuts, %d chips", len(fragments), stats["cuts"], stats["chips"])
     return Puzzle(fragments, contacts, bbox_min, bbox_max, float(volume), float(area), stats)
+
+
+def _without_specks(solid):
+    """``solid`` less its shells under :data:`SPECK_VOLUME` of its volume (floating crumbs,
+    or cavities a simplification left as shells of their own).
+
+    Every cut would also decompose into such a shell, and no part that small passes the
+    sliver test, so a mesh with one speck could not be broken at all.
+    """
+    import manifold3d as mf
+
+    bodies = solid.decompose()
+    if len(bodies) < 2:
+        return solid
+    total = abs(solid.volume())
+    kept = [b for b in bodies if abs(b.volume()) >= SPECK_VOLUME * total]
+    if len(kept) == len(bodies) or not kept:
+        return solid
+    log.info("dropped %d specks (shells under %g of the volume)", len(bodies) - len(kept), SPECK_VOLUME)
+    return mf.Manifold.compose(kept)
 
 
 def _face_labels(origin: np.ndarray, object_id: int, damage_ids: set[int], interior_ids: set[int]) -> np.ndarray:

@@ -150,3 +150,16 @@ def test_gap_option_moves_mating_surfaces_apart():
     assert abs(np.median(d) / diag - 0.01) < 0.002  # mating surfaces about the gap apart
     with pytest.raises(ReassembleError, match="--gap"):
         BreakParams(pieces=2, gap=-1).check()
+
+
+def test_a_mesh_with_floating_specks_still_breaks():
+    # a simplified scan often keeps a crumb or a cavity as a shell of its own; every cut
+    # would decompose into it too and fail the sliver test
+    import trimesh
+
+    body = _original("torus")
+    crumb = trimesh.creation.icosphere(subdivisions=1, radius=1e-3 * np.ptp(body.vertices, axis=0).max())
+    vertices = np.vstack([body.vertices, crumb.vertices + body.vertices.max(axis=0) * 1.1])
+    faces = np.vstack([body.faces, crumb.faces + len(body.vertices)])
+    puzzle = break_mesh(vertices, faces, BreakParams(pieces=3), rng=np.random.default_rng(0))
+    assert len(puzzle.fragments) == 3

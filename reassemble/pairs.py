@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
@@ -31,6 +32,45 @@ def registration_params(fragments: list[PreparedFragment], *, size: float, param
         params = dataclasses.replace(params, shortlist=params.shell_shortlist,
                                      consensus_pool=params.shell_consensus_pool)
     return params
+
+
+@dataclass
+class PairMemo:
+    """Pair registrations already made in a run, for its retries to reuse.
+
+    A retry segments the set again and registers every pair again; a pair whose two
+    fragments' matched surfaces (:class:`features.FractureSurface`) are unchanged would be
+    registered exactly as before (same surfaces, meshes, options and the pair's own random
+    stream), so its result is taken from here instead. Entries are keyed by the pair and the
+    options and checked against both surfaces, array by array.
+    """
+
+    entries: dict = field(default_factory=dict)  # (i, j, params) -> (surface i, surface j, PairResult)
+
+    def get(self, i: int, j: int, params, surfaces: list):
+        hit = self.entries.get((i, j, params))
+        if hit is None or not (_same_surface(hit[0], surfaces[i]) and _same_surface(hit[1], surfaces[j])):
+            return None
+        return hit[2]
+
+    def put(self, i: int, j: int, params, surfaces: list, result) -> None:
+        self.entries[(i, j, params)] = (surfaces[i], surfaces[j], result)
+
+
+def _same_surface(a, b) -> bool:
+    if a is b:
+        return True
+    if type(a) is not type(b):
+        return False
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            if not (isinstance(x, np.ndarray) and isinstance(y, np.ndarray) and x.dtype == y.dtype
+                    and np.array_equal(x, y)):
+                return False
+        elif x != y:
+            return False
+    return True
 
 
 def _pair_worker_init(surfaces, meshes, size, params) -> None:
@@ -59,6 +99,7 @@ def match_pairs(
     jobs: int = 1,
     scheduler: str | None = None,
     progress: bool = False,
+    memo: PairMemo | None = None,
 ) -> dict[tuple[int, int], object]:
     """Register fragment pairs (all, or the given (source, target) index pairs): PairResult per pair.
 
@@ -66,24 +107,37 @@ def match_pairs(
     stream (spawned from ``seed`` in pair order), so results do not depend on ``jobs``, nor
     on ``scheduler`` (the address of a Dask cluster to register them on instead).
     ``params``: default :func:`registration_params` of the fragments (noise-aware tolerance).
+    ``memo``: registrations made earlier in the run (:class:`PairMemo`), reused where
+    nothing a pair depends on has changed, and the new ones added to it.
     """
     params = params or registration_params(fragments, size=size)
     if pairs is None:
         pairs = [(i, j) for i in range(len(fragments)) for j in range(i + 1, len(fragments))]
+    # every pair's stream spawned in pair order, reused or not: a result never depends on
+    # which other pairs were registered
     rngs = np.random.default_rng(seed).spawn(len(pairs))
-    tasks = [(i, j, rng) for (i, j), rng in zip(pairs, rngs)]
-    init = ([f.surface for f in fragments], [f.mesh for f in fragments], size, params)
+    surfaces = [f.surface for f in fragments]
     results = {}
+    if memo is not None:
+        for i, j in pairs:
+            if (hit := memo.get(i, j, params, surfaces)) is not None:
+                results[(i, j)] = hit
+        if results:
+            log.info("%d of %d pairs unchanged since an earlier registration: reused", len(results), len(pairs))
+    tasks = [(i, j, rng) for (i, j), rng in zip(pairs, rngs) if (i, j) not in results]
+    init = (surfaces, [f.mesh for f in fragments], size, params)
     for key, res in tqdm(pool_map(_pair_worker, tasks, jobs=jobs, scheduler=scheduler, initializer=_pair_worker_init,
                                   initargs=init),
                          total=len(tasks), desc="pairs", disable=not progress):
         results[key] = res
-    return results
+        if memo is not None:
+            memo.put(*key, params, surfaces, res)
+    return {pair: results[pair] for pair in pairs}
 
 
 def match_set(
     fragments: list[PreparedFragment], *, size: float, params, gap: float | None = None, seed: int = 0,
-    jobs: int = 1, scheduler: str | None = None, progress: bool = False,
+    jobs: int = 1, scheduler: str | None = None, progress: bool = False, memo: PairMemo | None = None,
 ):
     """Register every pair, with the separation of mating surfaces measured or given.
 
@@ -100,7 +154,7 @@ def match_set(
     if gap is not None:
         params = dataclasses.replace(params, gap=float(gap))
     results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs, scheduler=scheduler,
-                           progress=progress)
+                           progress=progress, memo=memo)
     if gap is None:
         measured = set_gap([f.surface for f in fragments], results, size=size, params=params)
         if measured > params.tolerance:
@@ -108,6 +162,6 @@ def match_set(
                      "that gap", measured)
             params = dataclasses.replace(params, gap=measured)
             results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs,
-                                  scheduler=scheduler, progress=progress)
+                                  scheduler=scheduler, progress=progress, memo=memo)
     return results, params
 

@@ -23,7 +23,7 @@ from .errors import ReassembleError
 from .files import check_output_folder, load_mesh, mesh_warning, resolve_mesh_path, write_npz
 from .inputs import load_fragments
 from .outputs import pairs_json, run_report, write_match_folder, write_run_folder
-from .pairs import match_pairs, match_set, registration_params
+from .pairs import PairMemo, match_pairs, match_set, registration_params
 from .prepare import DescribedSet, PreparedFragment, describe_fragments, prepare_fragments, reference_size, thin_walled
 from .puzzle import PuzzleFiles, break_to_folder, evaluate_files, read_puzzle
 
@@ -88,7 +88,8 @@ def reassemble(
     t0 = time.perf_counter()
     described = describe_fragments(meshes, config=config, jobs=jobs, scheduler=scheduler, progress=progress)
     describing = time.perf_counter() - t0
-    result = _match(described, config, jobs=jobs, scheduler=scheduler, progress=progress)
+    memo = PairMemo()  # a retry registers again only the pairs a relabelled fragment is in
+    result = _match(described, config, jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)
     result.timings["prepare"] += describing
     if not assemble:
         return result
@@ -102,7 +103,8 @@ def reassemble(
             break
         log.info("%d of %d fragments unplaced: segmenting with %s too",
                  np.count_nonzero(~result.assembly.placed), len(result.fragments), _label(retry))
-        again = _match(described, retry, jobs=jobs, scheduler=scheduler, progress=progress, unless=tried)
+        again = _match(described, retry, jobs=jobs, scheduler=scheduler, progress=progress, unless=tried,
+                       memo=memo)
         if again is None:
             continue
         _assemble(again, progress=progress)
@@ -149,7 +151,7 @@ def _better(first: Result, second: Result, *, config: Config) -> Result:
 
 
 def _match(described: DescribedSet, config: Config, *, jobs: int, scheduler: str | None, progress: bool,
-           unless: list[Result] = ()) -> Result | None:
+           unless: list[Result] = (), memo: PairMemo | None = None) -> Result | None:
     """The segment, features and pairs steps on a described set; None when the fracture
     labels are those of a result in ``unless`` (matching them again would change nothing)."""
     t0 = time.perf_counter()
@@ -160,7 +162,7 @@ def _match(described: DescribedSet, config: Config, *, jobs: int, scheduler: str
     registration = registration_params(frags, size=size, params=config.registration)
     t1 = time.perf_counter()
     pairs, registration = match_set(frags, size=size, params=registration, gap=config.gap, seed=config.seed,
-                                    jobs=jobs, scheduler=scheduler, progress=progress)
+                                    jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)
     resolved = dataclasses.replace(config, thin_walls=thin_walled(frags), gap=registration.gap,
                                    registration=registration)
     return Result(resolved, frags, size, pairs, timings={"prepare": t1 - t0, "pairs": time.perf_counter() - t1})

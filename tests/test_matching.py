@@ -232,3 +232,28 @@ def test_segmentation_of_a_noisy_cad_part(tmp_path):
     pred = np.concatenate([f.segmentation.fracture for f in frags])
     area = np.concatenate([face_areas(f.vertices, f.faces) for f in frags])
     assert f1(labels, pred, area) > 0.9
+
+
+@pytest.mark.slow
+def test_a_retry_registers_again_only_the_pairs_of_changed_fragments(prepared):
+    import dataclasses
+
+    from reassemble.pairs import PairMemo
+
+    frags, size = prepared
+    pairs = [(0, 1), (0, 2), (1, 2)]
+    memo = PairMemo()
+    first = match_pairs(frags, size=size, pairs=pairs, seed=3, memo=memo)
+    s = frags[2].surface
+    fewer = dataclasses.replace(s, keypoints=s.keypoints[:-10], keypoint_normals=s.keypoint_normals[:-10],
+                                signature=s.signature[:-10])
+    changed = list(frags)
+    changed[2] = dataclasses.replace(frags[2], surface=fewer)
+    again = match_pairs(changed, size=size, pairs=pairs, seed=3, memo=memo)
+    fresh = match_pairs(changed, size=size, pairs=pairs, seed=3)
+    assert again[(0, 1)] is first[(0, 1)]
+    for pair in pairs:
+        assert list(again) == pairs and len(again[pair].candidates) == len(fresh[pair].candidates)
+        for x, y in zip(again[pair].candidates, fresh[pair].candidates):
+            assert np.array_equal(x.T_target_source, y.T_target_source) and x.score == y.score
+    assert again[(0, 2)] is not first[(0, 2)]

@@ -115,7 +115,9 @@ def _thinned(surface: FractureSurface, count: int) -> FractureSurface:
     return dataclasses.replace(
         surface, samples=surface.samples[:q], sample_normals=surface.sample_normals[:q],
         sample_area=surface.sample_area * len(surface.samples) / max(q, 1),
-        surface=surface.surface[:p], surface_area=surface.surface_area * len(surface.surface) / max(p, 1))
+        surface=surface.surface[:p], surface_area=surface.surface_area * len(surface.surface) / max(p, 1),
+        surface_normals=None if surface.surface_normals is None else surface.surface_normals[:p],
+        surface_original=None if surface.surface_original is None else surface.surface_original[:p])
 
 
 def _evaluate(pairs, poses, surfaces, scenes, *, tol, reg_params, centres, radii, cache, gap=0.0):
@@ -195,23 +197,29 @@ def group_surface(
             free_samples.append(np.ones(len(s.samples), bool))
             free_keys.append(np.ones(len(s.keypoints), bool))
 
-    def thin(points, normals, keep, unit):
-        """Concatenate each member's kept points, thinned to one area per point (the largest)."""
+    def thin(points, normals, keep, unit, flags=None):
+        """Concatenate each member's kept points (their normals and flags, where given),
+        thinned to one area per point (the largest)."""
         common = max(unit)
-        out_p, out_n = [], []
+        out_p, out_n, out_f = [], [], []
         for k in range(m):
             idx = np.flatnonzero(keep[k])
             idx = idx[: int(round(len(idx) * unit[k] / common))] if common > 0 else idx[:0]
             out_p.append(transform_points(T_group_fragment[k], points[k][idx]))
             if normals is not None:
                 out_n.append(normals[k][idx] @ T_group_fragment[k][:3, :3].T)
-        return np.vstack(out_p), (np.vstack(out_n) if normals is not None else None), common
+            if flags is not None:
+                out_f.append(flags[k][idx])
+        return (np.vstack(out_p), (np.vstack(out_n) if normals is not None else None), common,
+                (np.concatenate(out_f) if flags is not None else None))
 
-    samples, sample_normals, sample_area = thin([s.samples for s in surfaces], [s.sample_normals for s in surfaces],
-                                                free_samples, [s.sample_area for s in surfaces])
-    surface, _, surface_area = thin([s.surface for s in surfaces], None,
-                                    [np.ones(len(s.surface), bool) for s in surfaces],
-                                    [s.surface_area for s in surfaces])
+    samples, sample_normals, sample_area, _ = thin([s.samples for s in surfaces], [s.sample_normals for s in surfaces],
+                                                   free_samples, [s.sample_area for s in surfaces])
+    labelled = all(s.surface_normals is not None and s.surface_original is not None for s in surfaces)
+    surface, surface_normals, surface_area, surface_original = thin(
+        [s.surface for s in surfaces], [s.surface_normals for s in surfaces] if labelled else None,
+        [np.ones(len(s.surface), bool) for s in surfaces], [s.surface_area for s in surfaces],
+        [s.surface_original for s in surfaces] if labelled else None)
     R = [T[:3, :3] for T in T_group_fragment]
     return FractureSurface(
         keypoints=np.vstack([transform_points(T_group_fragment[k], s.keypoints[free_keys[k]])
@@ -227,6 +235,8 @@ def group_surface(
         area=float(sum(s.area for s in surfaces)),
         keypoint_tangents=None if any(s.keypoint_tangents is None for s in surfaces) else np.vstack(
             [s.keypoint_tangents[free_keys[k]] @ R[k].T for k, s in enumerate(surfaces)]),
+        surface_normals=surface_normals,
+        surface_original=surface_original,
     )
 
 

@@ -56,6 +56,9 @@ class FractureSurface:
     fracture_area, area : float
     keypoint_tangents : (k, 3) break tangents at the keypoints of a thin-walled fragment
         (:func:`shells.strip_frames`; sign arbitrary), None for solids
+    surface_normals : (p, 3) face normals at the whole-surface samples, None where unknown
+    surface_original : (p,) bool, whole-surface samples on faces not labelled fracture, None
+        where unknown (both for :func:`registration.seam_continuity`)
     """
 
     keypoints: np.ndarray
@@ -69,6 +72,8 @@ class FractureSurface:
     fracture_area: float
     area: float
     keypoint_tangents: np.ndarray | None = None
+    surface_normals: np.ndarray | None = None
+    surface_original: np.ndarray | None = None
 
 
 def offset_surface(surface: FractureSurface, distance: float) -> FractureSurface:
@@ -117,10 +122,11 @@ def empty_surface(
 ) -> FractureSurface:
     """The FractureSurface of a fragment with no fracture found: nothing to match, surface kept for collisions."""
     total = float(face_areas(vertices, faces).sum())
-    surface, _ = sample_surface(vertices, faces, n_samples, rng=rng)
+    surface, which = sample_surface(vertices, faces, n_samples, rng=rng)
     empty = np.zeros((0, 3))
     return FractureSurface(empty, empty, np.zeros((0, 2 * n_radii)), empty, empty, 0.0, surface,
-                           total / n_samples, 0.0, total)
+                           total / n_samples, 0.0, total, surface_normals=face_normals(vertices, faces)[which],
+                           surface_original=np.ones(len(surface), bool))
 
 
 def fracture_surface(
@@ -152,7 +158,7 @@ def fracture_surface(
         return empty_surface(vertices, faces, n_radii=n_radii, n_samples=n_samples, rng=rng)
     area = face_areas(vertices, faces)
     total = float(area.sum())
-    surface, _ = sample_surface(vertices, faces, n_samples, rng=rng)
+    surface, on_face = sample_surface(vertices, faces, n_samples, rng=rng)
     centres = vertices[faces[fracture]].mean(axis=1)
     chosen, cell = _grid_subsample(centres, spacing)
     keep = fracture[chosen]
@@ -171,4 +177,6 @@ def fracture_surface(
         surface_area=total / n_samples,
         fracture_area=frac_area,
         area=total,
+        surface_normals=face_normals(vertices, faces)[on_face],
+        surface_original=~np.asarray(segmentation.fracture, bool)[on_face],
     )

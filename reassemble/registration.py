@@ -12,8 +12,11 @@
    penetration count; the best few refined by point-to-plane ICP between the two fracture
    surfaces, on pairs with opposed normals only;
 4. every candidate scored by contact (source fracture area within a tolerance of the
-   target, or of the gap between them when material was lost at the break, normals opposed) minus interpenetration (surface area of either fragment that
-   lies inside the other, from Open3D signed distances), over the smaller fragment's area.
+   target, or of the gap between them when material was lost at the break, normals
+   opposed), counted in proportion to the continuity of the object's own surface across
+   the seam, minus interpenetration (surface area of either fragment that lies inside the
+   other, from Open3D signed distances), over the smaller fragment's area (of sherds: the
+   smaller break strip's).
 
 Transforms are ``T_target_source``: they map source coordinates into the target's frame.
 Why each step: ``docs/method/registration.md``.
@@ -73,6 +76,9 @@ class RegistrationParams:
         area also give placements by construction (:mod:`planes`), beside the signature
         hypotheses; 0 turns them off
     plane_candidates : candidates from those placements, beside ``candidates``
+    seam_angle : degrees: along a contact, original surface of one fragment continues the
+        other's when their normals agree within this (:func:`seam_continuity`); a placement's
+        contact counts in proportion to the share that does. 0 turns it off
     """
 
     tolerance: float = 0.006
@@ -104,6 +110,7 @@ class RegistrationParams:
     refinements: int = 2
     plane_area: float = 0.05
     plane_candidates: int = 2
+    seam_angle: float = 15.0
 
 
 def with_noise(params: RegistrationParams, *, noise: float, size: float) -> RegistrationParams:
@@ -125,7 +132,8 @@ class Candidate:
     Attributes
     ----------
     T_target_source : (4, 4) maps source coordinates into the target frame
-    score : (contact − weight · penetration) / the smaller fragment's area
+    score : (seam continuity · contact − weight · penetration) / the smaller fragment's
+        area (of sherds, the smaller break strip's)
     contact_area : source fracture area in contact with the target
     penetration_area : surface area of either fragment inside the other
     inliers : keypoint inliers of the RANSAC hypothesis
@@ -551,8 +559,85 @@ def contact_score(
     t_in_s = transform_points(invert_transform(T_target_source), target.surface)
     penetration = (_inside(target_scene, s_in_t[_within(s_in_t, target, tol)], tol) * source.surface_area
                    + _inside(source_scene, t_in_s[_within(t_in_s, source, tol)], tol) * target.surface_area)
-    smaller = min(source.area, target.area)
-    return (contact - params.penetration_weight * penetration) / smaller, contact, penetration
+    smaller = _score_area(source, target)
+    seam = seam_continuity(source, target, T_target_source, transform_points(T_target_source, source.samples[touching]),
+                           source_scene=source_scene, target_scene=target_scene, tol=tol, params=params)
+    return (seam * contact - params.penetration_weight * penetration) / smaller, contact, penetration
+
+
+def _score_area(source: FractureSurface, target: FractureSurface) -> float:
+    """The area a pair's score is a share of: the smaller fragment's whole area; between
+    thin-walled sherds, the smaller break strip's (a strip is a few percent of a sherd's
+    surface: its mate could never close a fixed share of the whole)."""
+    if source.keypoint_tangents is not None and target.keypoint_tangents is not None:
+        return max(min(source.fracture_area, target.fracture_area), 1e-300)
+    return min(source.area, target.area)
+
+
+def seam_continuity(
+    source: FractureSurface, target: FractureSurface, T_target_source: np.ndarray, contact: np.ndarray, *,
+    source_scene, target_scene, tol: float, params: RegistrationParams, min_samples: int = 8,
+) -> float:
+    """The share of the original surface along a contact that continues across it.
+
+    Whole-surface samples labelled original within reach of the ``contact`` points (target
+    coordinates), on either fragment, that do not themselves touch the other fragment, are
+    the seam; a seam sample continues when the other fragment has an original sample within
+    1.5 reaches whose normal agrees with its own within ``params.seam_angle``. The reach is twice
+    the tolerance, at least 2.5 whole-surface sample spacings. 1.0 (no evidence) when the
+    surfaces carry no labelled normals, the check is off, or the seam has fewer than
+    ``min_samples`` samples on both sides together.
+
+    Notes
+    -----
+    Where two fragments were one piece, the object's own surface runs on across the
+    break: along the seam it is continuous in position and tangent plane, whatever the
+    break's style or roughness, so this holds by construction for every true placement
+    (up to the curvature over the reach, and chips). A wrong placement that still closes
+    much of a break (a vessel's rim laid on another rim, a sherd turned inside out on a
+    slanted break, a cell face slid along its mate) leaves a kink or a step there.
+    """
+    if params.seam_angle <= 0 or len(contact) == 0 or any(
+            s.surface_normals is None or s.surface_original is None for s in (source, target)):
+        return 1.0
+    reach = max(2.0 * tol, 2.5 * np.sqrt(max(source.surface_area, target.surface_area)))
+    T_source_target = invert_transform(T_target_source)
+    sides = [(source, target, T_target_source, target_scene, contact),
+             (target, source, T_source_target, source_scene, transform_points(T_source_target, contact))]
+    continuous, total = 0, 0
+    for one, other, T_other_one, other_scene, near_points in sides:
+        c, t = _seam_side(one, other, T_other_one, near_points, other_scene=other_scene, reach=reach, tol=tol,
+                          params=params)
+        continuous, total = continuous + c, total + t
+    return continuous / total if total >= min_samples else 1.0
+
+
+def _seam_side(one, other, T_other_one, contact, *, other_scene, reach, tol, params) -> tuple[int, int]:
+    """(continuous, seam samples) of ``one``'s side of a seam (:func:`seam_continuity`),
+    in ``other``'s coordinates."""
+    import open3d as o3d
+    from scipy.spatial import cKDTree
+
+    p = transform_points(T_other_one, one.surface[one.surface_original])
+    if len(p) == 0:
+        return 0, 0
+    near = np.isfinite(cKDTree(contact).query(p, distance_upper_bound=reach)[0])
+    if not near.any():
+        return 0, 0
+    p, n = p[near], one.surface_normals[one.surface_original][near] @ T_other_one[:3, :3].T
+    # an original sample that touches the other fragment is break the labels missed, not seam
+    closest = other_scene.compute_closest_points(o3d.core.Tensor(p.astype(np.float32)))
+    dist = np.linalg.norm(closest["points"].numpy() - p, axis=1)
+    facing = np.einsum("ij,ij->i", n, closest["primitive_normals"].numpy()) < -np.cos(np.radians(params.normal_angle))
+    seam = ~((dist < tol) & facing)
+    p, n = p[seam], n[seam]
+    q, m = other.surface[other.surface_original], other.surface_normals[other.surface_original]
+    if len(p) == 0 or len(q) == 0:
+        return 0, len(p)
+    cos_seam = np.cos(np.radians(params.seam_angle))
+    # the other side's seam lies up to a reach beyond the contact: look that much farther
+    hoods = cKDTree(q).query_ball_point(p, 1.5 * reach)
+    return sum(bool(h) and float((m[h] @ v).max()) > cos_seam for h, v in zip(hoods, n)), len(p)
 
 
 def _inside(scene, points: np.ndarray, tol: float) -> int:
@@ -665,11 +750,12 @@ def set_gap(
     return float(np.asarray(gaps)[order][np.searchsorted(cum, 0.5 * cum[-1])])
 
 
-def _quick_ranked(source, target, T, *, tree, target_scene, tol: float, rtol: float, params: RegistrationParams,
-                  count: int | None = None):
+def _quick_ranked(source, target, T, *, tree, source_scene, target_scene, tol: float, rtol: float,
+                  params: RegistrationParams, count: int | None = None):
     """[(quick score, hypothesis index, coarse pose)] of the shortlist (``count``, default
     ``params.shortlist``, distinct hypotheses), best first: a quick coarse ICP on
-    ``params.quick_samples`` fracture samples, then contact minus weighted penetration on them."""
+    ``params.quick_samples`` fracture samples, then contact (in proportion to its seam's
+    continuity, :func:`seam_continuity`) minus weighted penetration on them."""
     cos_tol = np.cos(np.radians(params.normal_angle))
     quick = []
     n, m = params.quick_samples, params.quick_surface_samples
@@ -680,8 +766,10 @@ def _quick_ranked(source, target, T, *, tree, target_scene, tol: float, rtol: fl
         ok, _ = opposed_neighbours(tree, p, source.sample_normals[:n] @ coarse[:3, :3].T, target.sample_normals,
                                    reach=params.quick_contact * tol, cos_tol=cos_tol)
         inside = _inside(target_scene, transform_points(coarse, source.surface[:m]), tol)
+        seam = seam_continuity(source, target, coarse, p[ok], source_scene=source_scene, target_scene=target_scene,
+                               tol=tol, params=params)
         # the same units as the full score: contact minus weighted penetration, as areas
-        quick.append((ok.sum() * source.sample_area * len(source.samples) / n
+        quick.append((seam * ok.sum() * source.sample_area * len(source.samples) / n
                       - params.penetration_weight * inside * source.surface_area * len(source.surface) / m, i, coarse))
     quick.sort(key=lambda q: -q[0])
     return quick
@@ -745,13 +833,14 @@ def register_pair(
     from scipy.spatial import cKDTree
 
     tree = cKDTree(target.samples)
-    quick = _quick_ranked(source, target, T, tree=tree, target_scene=target_scene, tol=tol, rtol=rtol, params=params)
+    quick = _quick_ranked(source, target, T, tree=tree, source_scene=source_scene, target_scene=target_scene, tol=tol,
+                          rtol=rtol, params=params)
     flat = _plane_hypotheses(source, target, tol=tol, params=params, rng=rng)
     # placements by construction (index -1: no RANSAC inliers) have slots of their own: two
     # planar faces of other fragments, laid together, touch over as much as true mates do
     laid = [(q, -1, coarse) for q, _, coarse in _quick_ranked(
-        source, target, flat, tree=tree, target_scene=target_scene, tol=tol, rtol=rtol, params=params,
-        count=len(flat))] if len(flat) else []
+        source, target, flat, tree=tree, source_scene=source_scene, target_scene=target_scene, tol=tol, rtol=rtol,
+        params=params, count=len(flat))] if len(flat) else []
     laid.sort(key=lambda q: -q[0])
     # different hypotheses often converge to one pose: keep distinct ones, so the
     # assembly gets real alternatives (up to twice as many refinements as candidates)
@@ -780,5 +869,6 @@ def register_pair(
 
 __all__ = [
     "Candidate", "PairResult", "RegistrationParams", "contact_rms", "contact_score", "correspondences", "estimate_gap", "frame_hypotheses", "contact_relief", "icp",
-    "kabsch", "opposed_neighbours", "ransac", "register_pair", "set_gap", "touching_samples", "with_noise",
+    "kabsch", "opposed_neighbours", "ransac", "register_pair", "seam_continuity", "set_gap", "touching_samples",
+    "with_noise",
 ]

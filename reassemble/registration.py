@@ -562,7 +562,7 @@ def contact_score(
     smaller = _score_area(source, target)
     seam = seam_continuity(source, target, T_target_source, transform_points(T_target_source, source.samples[touching]),
                            source_scene=source_scene, target_scene=target_scene, tol=tol, params=params)
-    return (seam * contact - params.penetration_weight * penetration) / smaller, contact, penetration
+    return float((seam * contact - params.penetration_weight * penetration) / smaller), contact, penetration
 
 
 def _score_area(source: FractureSurface, target: FractureSurface) -> float:
@@ -609,7 +609,7 @@ def seam_continuity(
         c, t = _seam_side(one, other, T_other_one, near_points, other_scene=other_scene, reach=reach, tol=tol,
                           params=params)
         continuous, total = continuous + c, total + t
-    return continuous / total if total >= min_samples else 1.0
+    return float(continuous / total) if total >= min_samples else 1.0
 
 
 def _seam_side(one, other, T_other_one, contact, *, other_scene, reach, tol, params) -> tuple[int, int]:
@@ -637,7 +637,7 @@ def _seam_side(one, other, T_other_one, contact, *, other_scene, reach, tol, par
     cos_seam = np.cos(np.radians(params.seam_angle))
     # the other side's seam lies up to a reach beyond the contact: look that much farther
     hoods = cKDTree(q).query_ball_point(p, 1.5 * reach)
-    return sum(bool(h) and float((m[h] @ v).max()) > cos_seam for h, v in zip(hoods, n)), len(p)
+    return int(sum(bool(h) and float((m[h] @ v).max()) > cos_seam for h, v in zip(hoods, n))), len(p)
 
 
 def _inside(scene, points: np.ndarray, tol: float) -> int:
@@ -863,7 +863,7 @@ def register_pair(
         moved = transform_points(candidates[0].T_target_source, source.keypoints[pairs[:, 0]])
         near = np.linalg.norm(moved - target.keypoints[pairs[:, 1]], axis=1) < rtol
         matches = pairs[near]
-    touching = bool(candidates) and candidates[0].score >= params.min_score
+    touching = bool(candidates) and bool(candidates[0].score >= params.min_score)
     return PairResult(candidates, touching, matches)
 
 

@@ -25,6 +25,7 @@ Why each step: ``docs/method/registration.md``.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -618,13 +619,14 @@ def _seam_side(one, other, T_other_one, contact, *, other_scene, reach, tol, par
     import open3d as o3d
     from scipy.spatial import cKDTree
 
-    p = transform_points(T_other_one, one.surface[one.surface_original])
-    if len(p) == 0:
+    original = np.flatnonzero(one.surface_original)
+    if len(original) == 0:
         return 0, 0
+    p = transform_points(T_other_one, one.surface[original])
     near = np.isfinite(cKDTree(contact).query(p, distance_upper_bound=reach)[0])
     if not near.any():
         return 0, 0
-    p, n = p[near], one.surface_normals[one.surface_original][near] @ T_other_one[:3, :3].T
+    p, n = p[near], one.surface_normals[original[near]] @ T_other_one[:3, :3].T
     # an original sample that touches the other fragment is break the labels missed, not seam
     closest = other_scene.compute_closest_points(o3d.core.Tensor(p.astype(np.float32)))
     dist = np.linalg.norm(closest["points"].numpy() - p, axis=1)
@@ -634,10 +636,13 @@ def _seam_side(one, other, T_other_one, contact, *, other_scene, reach, tol, par
     q, m = other.surface[other.surface_original], other.surface_normals[other.surface_original]
     if len(p) == 0 or len(q) == 0:
         return 0, len(p)
-    cos_seam = np.cos(np.radians(params.seam_angle))
     # the other side's seam lies up to a reach beyond the contact: look that much farther
     hoods = cKDTree(q).query_ball_point(p, 1.5 * reach)
-    return int(sum(bool(h) and float((m[h] @ v).max()) > cos_seam for h, v in zip(hoods, n))), len(p)
+    counts = np.fromiter(map(len, hoods), np.int64, len(hoods))
+    owner = np.repeat(np.arange(len(p)), counts)
+    flat = np.fromiter(itertools.chain.from_iterable(hoods), np.int64, int(counts.sum()))
+    agree = np.einsum("ij,ij->i", m[flat], n[owner]) > np.cos(np.radians(params.seam_angle))
+    return int(np.count_nonzero(np.bincount(owner[agree], minlength=len(p)))), len(p)
 
 
 def _inside(scene, points: np.ndarray, tol: float) -> int:

@@ -15,8 +15,7 @@
    target, or of the gap between them when material was lost at the break, normals
    opposed), counted in proportion to the continuity of the object's own surface across
    the seam, minus interpenetration (surface area of either fragment that lies inside the
-   other, from Open3D signed distances), over the smaller fragment's area (of sherds: the
-   smaller break strip's).
+   other, from Open3D signed distances), over the smaller of the two breaks' areas.
 
 Transforms are ``T_target_source``: they map source coordinates into the target's frame.
 Why each step: ``docs/method/registration.md``.
@@ -52,7 +51,8 @@ class RegistrationParams:
     normal_angle : degrees: agreement of normal angles within a triple, and the largest
         deviation from exactly opposed normals of an inlier
     penetration_weight : penalty per unit of interpenetrating area against contact area
-    min_score : below it the verdict is "these two do not touch"
+    min_score : below it the verdict is "these two do not touch" (a share of the smaller
+        break, :func:`contact_score`)
     noise_tolerance : the contact tolerance is at least this many standard deviations of
         the gap between two surfaces with the set's vertex noise (:func:`with_noise`)
     consensus_pool : hypotheses kept after the first, coarse consensus count for the finer one
@@ -80,6 +80,9 @@ class RegistrationParams:
     seam_angle : degrees: along a contact, original surface of one fragment continues the
         other's when their normals agree within this (:func:`seam_continuity`); a placement's
         contact counts in proportion to the share that does. 0 turns it off
+    break_floor : a fragment's break counts as at least this share of its whole area when
+        scores are normalised (a segmentation that found little of a break must not make any
+        contact with it look like a closed break)
     """
 
     tolerance: float = 0.006
@@ -92,7 +95,7 @@ class RegistrationParams:
     candidates: int = 5
     normal_angle: float = 30.0
     penetration_weight: float = 2.0
-    min_score: float = 0.02
+    min_score: float = 0.06
     noise_tolerance: float = 2.5
     consensus_pool: int = 300
     gap: float = 0.0
@@ -112,6 +115,7 @@ class RegistrationParams:
     plane_area: float = 0.05
     plane_candidates: int = 2
     seam_angle: float = 15.0
+    break_floor: float = 0.03
 
 
 def with_noise(params: RegistrationParams, *, noise: float, size: float) -> RegistrationParams:
@@ -133,8 +137,8 @@ class Candidate:
     Attributes
     ----------
     T_target_source : (4, 4) maps source coordinates into the target frame
-    score : (seam continuity · contact − weight · penetration) / the smaller fragment's
-        area (of sherds, the smaller break strip's)
+    score : (seam continuity · contact − weight · penetration) / the smaller break's area
+        (:func:`contact_score`)
     contact_area : source fracture area in contact with the target
     penetration_area : surface area of either fragment inside the other
     inliers : keypoint inliers of the RANSAC hypothesis
@@ -547,7 +551,8 @@ def contact_score(
     gap: float = 0.0,
 ) -> tuple[float, float, float]:
     """(score, contact area, penetration area) of a placement; ``gap`` (mesh units) as in
-    :func:`touching_samples`.
+    :func:`touching_samples`. The score is seam continuity x contact minus
+    ``penetration_weight`` x penetration, over the smaller break's area (:func:`_score_area`).
 
     Only points inside the other fragment's bounding box (grown by the tolerance and the
     sample spacing) are queried: the others can neither touch nor be inside it.
@@ -560,19 +565,24 @@ def contact_score(
     t_in_s = transform_points(invert_transform(T_target_source), target.surface)
     penetration = (_inside(target_scene, s_in_t[_within(s_in_t, target, tol)], tol) * source.surface_area
                    + _inside(source_scene, t_in_s[_within(t_in_s, source, tol)], tol) * target.surface_area)
-    smaller = _score_area(source, target)
+    smaller = _score_area(source, target, floor=params.break_floor)
     seam = seam_continuity(source, target, T_target_source, transform_points(T_target_source, source.samples[touching]),
                            source_scene=source_scene, target_scene=target_scene, tol=tol, params=params)
     return float((seam * contact - params.penetration_weight * penetration) / smaller), contact, penetration
 
 
-def _score_area(source: FractureSurface, target: FractureSurface) -> float:
-    """The area a pair's score is a share of: the smaller fragment's whole area; between
-    thin-walled sherds, the smaller break strip's (a strip is a few percent of a sherd's
-    surface: its mate could never close a fixed share of the whole)."""
-    if source.keypoint_tangents is not None and target.keypoint_tangents is not None:
-        return max(min(source.fracture_area, target.fracture_area), 1e-300)
-    return min(source.area, target.area)
+def _score_area(source: FractureSurface, target: FractureSurface, *, floor: float) -> float:
+    """The area a pair's score is a share of: the smaller of the two breaks (fracture
+    areas), each at least ``floor`` of its fragment's whole area.
+
+    Notes
+    -----
+    A true mate closes a share of the break it meets whatever the object's shape, while its
+    share of the whole fragment shrinks with how thin the part is: a flat ring's or a sherd's
+    break is 2-7 % of its surface, a compact solid's 15-50 %. Over the break, one threshold
+    (``min_score``, ``AssemblyParams.min_gain``) serves all of them.
+    """
+    return max(min(max(s.fracture_area, floor * s.area) for s in (source, target)), 1e-300)
 
 
 def seam_continuity(

@@ -8,11 +8,12 @@ from reassemble.geometry import face_areas, face_normals, make_scene, make_trans
 from reassemble.registration import RegistrationParams, contact_score, seam_continuity, touching_samples
 
 
-def _half_bar(side: float):
-    """Half of a 1 x 0.6 x 0.3 bar cut at x = 0 (the x >= 0 half for side +1): (vertices, faces, fracture)."""
+def _half_bar(side: float, thickness: float = 0.3):
+    """Half of a 1 x 0.6 x ``thickness`` bar cut at x = 0 (the x >= 0 half for side +1): (vertices, faces, fracture)."""
     import trimesh
 
-    half = trimesh.creation.box(extents=[0.5, 0.6, 0.3], transform=make_transform(np.eye(3), [0.25 * side, 0, 0]))
+    half = trimesh.creation.box(extents=[0.5, 0.6, thickness],
+                                transform=make_transform(np.eye(3), [0.25 * side, 0, 0]))
     half = half.subdivide().subdivide().subdivide()
     v, f = np.asarray(half.vertices, float), np.asarray(half.faces)
     return v, f, np.abs(v[f][:, :, 0]).max(axis=1) < 1e-9  # the faces on the cut
@@ -76,15 +77,24 @@ def test_no_labelled_normals_is_no_evidence(halves):
                            params=RegistrationParams()) == 1.0
 
 
-def test_between_sherds_the_score_is_a_share_of_the_break_strip(halves):
+def test_the_score_is_a_share_of_the_smaller_break_however_thin_the_part(halves):
     import dataclasses
 
     (a, scene_a), (b, scene_b) = halves
-    kw = dict(source_scene=scene_a, target_scene=scene_b, tol=0.01, params=RegistrationParams())
-    solid, contact, _ = contact_score(a, b, np.eye(4), **kw)
-    assert solid == pytest.approx(contact * _continuity(halves, np.eye(4), kw["params"]) / a.area)
-    # as sherds (strip tangents given), the same contact closes nearly all of the smaller break
-    strip = [dataclasses.replace(s, keypoint_tangents=np.zeros((0, 3))) for s in (a, b)]
-    sherd, _, _ = contact_score(*strip, np.eye(4), **kw)
-    assert sherd == pytest.approx(solid * a.area / min(a.fracture_area, b.fracture_area))
-    assert sherd > 0.85
+    params = RegistrationParams()
+    kw = dict(source_scene=scene_a, target_scene=scene_b, tol=0.01, params=params)
+    score, contact, _ = contact_score(a, b, np.eye(4), **kw)
+    assert score == pytest.approx(contact * _continuity(halves, np.eye(4), params) / min(a.fracture_area, b.fracture_area))
+    assert score > 0.85  # the true mate closes nearly all of the break
+    # a plate a sixth as thick: its break is 4 % of its surface, and its mate closes it as well
+    rng = np.random.default_rng(1)
+    (va, fa, ka), (vb, fb, kb) = _half_bar(1.0, 0.05), _half_bar(-1.0, 0.05)
+    pa, pb = _surface(va, fa, ka, rng), _surface(vb, fb, kb, rng)
+    assert pa.fracture_area < 0.05 * pa.area
+    thin, _, _ = contact_score(pa, pb, np.eye(4), source_scene=make_scene(va, fa), target_scene=make_scene(vb, fb),
+                               tol=0.01, params=params)
+    assert thin > 0.8 and thin > params.min_score
+    # a break the segmentation barely found counts as break_floor of the whole surface
+    missed = dataclasses.replace(b, fracture_area=1e-6)
+    floored, _, _ = contact_score(a, missed, np.eye(4), **kw)
+    assert floored == pytest.approx(score * b.fracture_area / (params.break_floor * b.area))

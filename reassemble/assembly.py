@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from .features import FractureSurface
 from .geometry import farthest_points, invert_transform, make_scene, rotation_from_vector, transform_points
-from .registration import RegistrationParams, contact_score, opposed_neighbours, touching_samples
+from .registration import RegistrationParams, contact_score, opposed_neighbours, rim_pairs, touching_samples
 
 
 @dataclass(frozen=True)
@@ -45,6 +45,9 @@ class AssemblyParams:
     verify_samples : samples per fragment when verifying a merge
     refine_levels : distance thresholds of the joint refinement, coarse to fine, multiples of
         the contact tolerance (:func:`refine`); refine_samples : fracture samples per fragment it uses
+    rim_reach : the refinement's finest level also aligns the rims of touching fragments within
+        this multiple of its threshold (0: contact alone; :func:`refine`); rim_weight : their
+        rows' weight in all, as a share of the contact rows' 
     world_gap : space between the main assembly and the other sub-assemblies in the world
         frame (:func:`world_poses`)
     touching_points : touching points kept per contact, for the pictures (:func:`contact_points`)
@@ -58,6 +61,8 @@ class AssemblyParams:
     verify_samples: int = 1000
     refine_levels: tuple[float, ...] = (2.0, 1.0)
     refine_samples: int = 1500
+    rim_reach: float = 3.0
+    rim_weight: float = 0.1
     world_gap: float = 0.1
     touching_points: int = 40
 
@@ -341,7 +346,8 @@ def assemble(
         if len(g) > 1:
             poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
                               iterations=params.refine_iterations, anchor=int(np.argmax(areas[g])),
-                              levels=params.refine_levels, n_points=params.refine_samples, gap=gap)
+                              levels=params.refine_levels, n_points=params.refine_samples, gap=gap,
+                              rim_reach=params.rim_reach, rim_weight=params.rim_weight)
 
     # contacts at the final poses, and the groups renumbered by area
     contacts = []
@@ -414,8 +420,27 @@ def _union(meshes: list[tuple[np.ndarray, np.ndarray]], T_group_fragment: np.nda
     return np.vstack(vertices), np.vstack(faces)
 
 
+def _accumulate(AtA: np.ndarray, Atb: np.ndarray, col: dict[int, int], p: int, q: int, P: np.ndarray,
+                Q: np.ndarray, N: np.ndarray, weight=1.0) -> None:
+    """Add the rows ``(P − Q)·N`` of p's points P against q's points Q along N (all (k, 3),
+    common frame), each weighing ``weight`` (scalar or (k,)), to the normal equations, for
+    whichever of p and q is free."""
+    weight = np.broadcast_to(np.asarray(weight, float), (len(P),))
+    r = np.einsum("ij,ij->i", P - Q, N)
+    blocks = []
+    if p in col:
+        blocks.append((col[p], np.hstack([np.cross(P, N), N])))
+    if q in col:
+        blocks.append((col[q], -np.hstack([np.cross(Q, N), N])))
+    for ca, Ja in blocks:
+        Atb[ca:ca + 6] -= Ja.T @ (weight * r)
+        for cb, Jb in blocks:
+            AtA[ca:ca + 6, cb:cb + 6] += Ja.T @ (weight[:, None] * Jb)
+
+
 def _normal_equations(pairs: list[tuple[int, int]], pts: list[np.ndarray], nrm: list[np.ndarray], trees: dict,
-                      col: dict[int, int], *, distance: float, cos_tol: float, gap: float):
+                      col: dict[int, int], *, distance: float, cos_tol: float, gap: float, rims=None,
+                      rim_reach: float = 0.0, rim_weight: float = 0.1, tol: float = 0.0):
     """The point-to-plane normal equations of one step of :func:`refine`.
 
     Parameters
@@ -427,6 +452,10 @@ def _normal_equations(pairs: list[tuple[int, int]], pts: list[np.ndarray], nrm: 
     distance : matches further apart are ignored
     cos_tol : matched normals must be opposed within this cosine
     gap : separation kept between mating surfaces
+    rims : per fragment, its rim in the common frame (:func:`_placed_rim`), or None: each
+        touching pair's rim points also count, along the direction across the other's matched
+        rim point (:func:`registration.rim_pairs` within ``rim_reach``, robust weights on the
+        scale of ``tol``), with ``rim_weight`` times the weight of the pair's contact rows in all
 
     Returns
     -------
@@ -442,19 +471,24 @@ def _normal_equations(pairs: list[tuple[int, int]], pts: list[np.ndarray], nrm: 
         if not ok.any():
             continue
         touching.append((p, q))
-        P, Q, N = pts[p][ok], pts[q][j[ok]] + gap * nrm[q][j[ok]], nrm[q][j[ok]]
-        r = np.einsum("ij,ij->i", P - Q, N)
-        blocks = []
-        if p in col:
-            blocks.append((col[p], np.hstack([np.cross(P, N), N])))
-        if q in col:
-            blocks.append((col[q], -np.hstack([np.cross(Q, N), N])))
-        for ca, Ja in blocks:
-            Atb[ca:ca + 6] -= Ja.T @ r
-            for cb, Jb in blocks:
-                AtA[ca:ca + 6, cb:cb + 6] += Ja.T @ Jb
-        rows += len(r)
+        N = nrm[q][j[ok]]
+        _accumulate(AtA, Atb, col, p, q, pts[p][ok], pts[q][j[ok]] + gap * N, N)
+        rows += int(ok.sum())
+        if rims is None or rims[p] is None or rims[q] is None:
+            continue
+        (P, U), (target, tree) = rims[p][:2], rims[q][2:]
+        on, k, w = rim_pairs(P, U, target, reach=rim_reach, tol=tol, tree=tree)
+        if len(on) >= 6:
+            _accumulate(AtA, Atb, col, p, q, P[on], target.rim[k], target.rim_directions[k],
+                        weight=rim_weight * float(ok.sum()) * w / w.sum())
     return AtA, Atb, rows, touching
+
+
+def _placed_rim(surface: FractureSurface, T: np.ndarray):
+    """(points, directions, the rim as a FractureSurface in the common frame, its cKDTree)."""
+    points, directions = transform_points(T, surface.rim), surface.rim_directions @ T[:3, :3].T
+    moved = dataclasses.replace(surface, rim=points, rim_directions=directions)
+    return points, directions, moved, cKDTree(points)
 
 
 def refine(
@@ -468,12 +502,18 @@ def refine(
     levels: tuple[float, ...] = (2.0, 1.0),
     n_points: int = 1500,
     gap: float = 0.0,
+    rim_reach: float = 0.0,
+    rim_weight: float = 0.1,
 ) -> np.ndarray:
     """Joint point-to-plane refinement of the poses of one sub-assembly.
 
     Every pair of fragments contributes its fracture samples within a distance threshold
     (``levels`` times ``tol``, coarse to fine) of the other's, with opposed normals; all
     poses but the anchor's move at once (linearized rotations, damped least squares).
+    With ``rim_reach`` > 0, at the finest threshold each touching pair's rims
+    (:func:`features.rim_points`) within ``rim_reach`` times it of each other count too,
+    across the rim: contact leaves a smooth break free to slide along its mate, the shared
+    outline does not.
 
     Parameters
     ----------
@@ -485,6 +525,9 @@ def refine(
     anchor : index of the fragment that stays fixed
     n_points : fracture samples per fragment used (the first: they are in random order)
     gap : separation kept between mating surfaces (mesh units; RegistrationParams.gap)
+    rim_reach : at the finest level, rim points match within this multiple of its threshold
+        (0: rims unused); rim_weight : their rows' weight in all, as a share of the contact
+        rows' (light: they decide the motions contact leaves free, :func:`registration.icp`)
 
     Returns
     -------
@@ -504,8 +547,13 @@ def refine(
             nrm = [s.sample_normals[:n_points] @ T[k][:3, :3].T for k, s in enumerate(surfaces)]
             # each source sample is matched to the target's surface moved out by the gap
             trees = {q: cKDTree(pts[q] + gap * nrm[q]) for q in {q for _, q in pairs}}
+            rims = None
+            if rim_reach > 0 and distance == levels[-1] * tol:  # once contact has settled
+                rims = [None if s.rim is None or len(s.rim) < 6 else _placed_rim(s, T[k]) for k, s in enumerate(surfaces)]
             AtA, Atb, rows, touching = _normal_equations(pairs, pts, nrm, trees, col, distance=distance,
-                                                         cos_tol=cos_tol, gap=gap)
+                                                         cos_tol=cos_tol, gap=gap, rims=rims,
+                                                         rim_reach=rim_reach * distance, rim_weight=rim_weight,
+                                                         tol=tol)
             if rows < 6:
                 return T
             scale = max(np.trace(AtA) / max(len(AtA), 1), 1e-300)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import face_areas, face_normals, sample_surface
+from .geometry import face_adjacency, face_areas, face_normals, sample_surface
 from .segmentation import Segmentation
 
 
@@ -59,6 +59,11 @@ class FractureSurface:
     surface_normals : (p, 3) face normals at the whole-surface samples, None where unknown
     surface_original : (p,) bool, whole-surface samples on faces not labelled fracture, None
         where unknown (both for :func:`registration.seam_continuity`)
+    rim : (r, 3) points on the rim, the mesh edges between fracture and original faces (their
+        midpoints), None where unknown (:func:`rim_points`)
+    rim_directions : (r, 3) unit directions across the rim, in the fracture surface, from the
+        fracture towards the original surface
+    rim_lengths : (r,) the length of rim each point stands for
     """
 
     keypoints: np.ndarray
@@ -74,6 +79,69 @@ class FractureSurface:
     keypoint_tangents: np.ndarray | None = None
     surface_normals: np.ndarray | None = None
     surface_original: np.ndarray | None = None
+    rim: np.ndarray | None = None
+    rim_directions: np.ndarray | None = None
+    rim_lengths: np.ndarray | None = None
+
+
+def rim_points(
+    vertices: np.ndarray, faces: np.ndarray, fracture: np.ndarray, *, radius: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where a fracture surface ends: its rim, and the direction across it.
+
+    Parameters
+    ----------
+    vertices, faces : the fragment
+    fracture : (f,) bool, faces labelled fracture
+    radius : the directions are averaged over the rim within this distance (mesh units): a
+        rim between labelled triangles zigzags, its mean course does not
+
+    Returns
+    -------
+    points : (r, 3) midpoints of the edges between a fracture and an original face
+    directions : (r, 3) unit vectors in the fracture surface, across the rim's mean course,
+        pointing out of the fracture region
+    lengths : (r,) edge lengths
+
+    Notes
+    -----
+    Two mates share their break, so they share its outline: at the true placement each rim
+    point of one lies on the other's rim, with the same direction across it. Contact alone
+    leaves a smooth break free to slide along itself (by a few tolerances under scan noise);
+    the outline pins it. Points whose neighbourhood gives no clear direction (a rim shorter
+    than ``radius``, or folded on itself) are left out.
+    """
+    from scipy.spatial import cKDTree
+
+    fracture = np.asarray(fracture, bool)
+    pairs, edges = face_adjacency(faces)
+    cross = fracture[pairs[:, 0]] != fracture[pairs[:, 1]]
+    empty = np.zeros((0, 3))
+    if not cross.any():
+        return empty, empty, np.zeros(0)
+    pairs, edges = pairs[cross], edges[cross]
+    inner = np.where(fracture[pairs[:, 0]], pairs[:, 0], pairs[:, 1])
+    a, b = vertices[edges[:, 0]], vertices[edges[:, 1]]
+    points, lengths = 0.5 * (a + b), np.linalg.norm(b - a, axis=1)
+    normal = face_normals(vertices, faces)[inner]
+    # each edge's own direction across: in the fracture face, out of it
+    across = np.cross(normal, b - a)
+    inside = points - vertices[faces[inner]].mean(axis=1)
+    across *= np.where(np.einsum("ij,ij->i", across, inside) < 0, -1.0, 1.0)[:, None]
+    across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
+    directions = np.zeros_like(points)
+    keep = np.zeros(len(points), bool)
+    for i, hood in enumerate(cKDTree(points).query_ball_point(points, radius)):
+        w = lengths[hood]
+        n = (w[:, None] * normal[hood]).sum(axis=0)
+        n /= max(np.linalg.norm(n), 1e-300)
+        # summed by length, a zigzag's directions add up to its mean course turned by 90 degrees
+        u = (w[:, None] * across[hood]).sum(axis=0)
+        u -= (u @ n) * n
+        norm = np.linalg.norm(u)
+        keep[i] = norm > 0.3 * w.sum()  # a clear course keeps a good part of the summed length
+        directions[i] = u / max(norm, 1e-300)
+    return points[keep], directions[keep], lengths[keep]
 
 
 def offset_surface(surface: FractureSurface, distance: float) -> FractureSurface:
@@ -166,6 +234,7 @@ def fracture_surface(
     sub = faces[fracture]
     samples, which = sample_surface(vertices, sub, n_samples, rng=rng)
     frac_area = float(area[fracture].sum())
+    rim, rim_directions, rim_lengths = rim_points(vertices, faces, segmentation.fracture, radius=spacing)
     return FractureSurface(
         keypoints=vertices[faces[keep]].mean(axis=1),
         keypoint_normals=normals,
@@ -179,4 +248,7 @@ def fracture_surface(
         area=total,
         surface_normals=face_normals(vertices, faces)[on_face],
         surface_original=~np.asarray(segmentation.fracture, bool)[on_face],
+        rim=rim,
+        rim_directions=rim_directions,
+        rim_lengths=rim_lengths,
     )

@@ -83,6 +83,9 @@ class RegistrationParams:
     break_floor : a fragment's break counts as at least this share of its whole area when
         scores are normalised (a segmentation that found little of a break must not make any
         contact with it look like a closed break)
+    rim_reach : the full ICP's finest step also aligns the two rims within this multiple of
+        ``tolerance`` (:func:`icp`; 0: contact alone); rim_weight : their rows' weight in all,
+        as a share of the contact rows' 
     """
 
     tolerance: float = 0.006
@@ -116,6 +119,8 @@ class RegistrationParams:
     plane_candidates: int = 2
     seam_angle: float = 15.0
     break_floor: float = 0.03
+    rim_reach: float = 3.0
+    rim_weight: float = 0.1
 
 
 def with_noise(params: RegistrationParams, *, noise: float, size: float) -> RegistrationParams:
@@ -419,16 +424,83 @@ def opposed_neighbours(tree, points: np.ndarray, normals: np.ndarray, target_nor
 def icp(
     source: FractureSurface, target: FractureSurface, T: np.ndarray, *, tol: float, normal_angle: float = 30.0,
     iterations: int = 10, levels: tuple[float, ...] = (3.0, 2.0, 1.0), tree=None, n_points: int | None = None,
+    rim_reach: float = 0.0,
+    rim_weight: float = 0.1,
 ) -> np.ndarray:
     """Point-to-plane ICP of the source fracture samples onto the target's, from ``T``.
 
     Only pairs with opposed normals count (Open3D's ICP has no such test: on a small contact
     it slid onto the neighbouring fracture faces of the other fragment). Coarse
     to fine: distance thresholds ``levels`` times ``tol``; the first ``n_points`` samples only
-    when given (the samples are in random order).
+    when given (the samples are in random order). With ``rim_reach`` > 0, at the finest
+    threshold the two rims (:func:`features.rim_points`) within ``rim_reach`` times it of each
+    other are aligned too, across the rim, with ``rim_weight`` times the contact rows' weight
+    in all (:func:`_rim_rows`): only once contact has settled, so that a rim mislabelled far
+    from its mate's cannot drag a pose out of its basin, and lightly, so that they decide
+    only the motions contact leaves free (sliding along a smooth break), not those a rough
+    break pins better than labelled rims do.
     """
     return _icp(source, target, T, tol=tol, normal_angle=normal_angle, iterations=iterations, levels=levels,
-                tree=tree, n_points=n_points, max_gap=0.0)[0]
+                tree=tree, n_points=n_points, max_gap=0.0, rim_reach=rim_reach, rim_weight=rim_weight)[0]
+
+
+RIM_HUBER = 0.25  # rim offsets beyond this many contact tolerances weigh as 1/offset (Huber)
+
+
+def rim_pairs(points: np.ndarray, directions: np.ndarray, target: FractureSurface, *, reach: float, tol: float,
+              tree=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rim points matched to a mate's rim, for aligning the two across their common course.
+
+    Parameters
+    ----------
+    points, directions : (k, 3) rim points and directions across the rim
+        (:func:`features.rim_points`), in the target's frame
+    target : FractureSurface with ``rim`` and ``rim_directions``
+    reach : largest distance to the matched target rim point (mesh units)
+    tol : contact tolerance (mesh units), the scale of the robust weights
+    tree : cKDTree of ``target.rim``, when already built
+
+    Returns
+    -------
+    ok : (m,) indices of the matched points: the nearest target rim point within ``reach``,
+        its direction within 60 degrees
+    j : (m,) the matched target rim points
+    weights : (m,) robust weights of the offsets ``(p − q)·v`` along the target's direction:
+        1 up to ``RIM_HUBER`` tolerances, then falling as 1/offset (a stretch of rim
+        labelled a tolerance or more off its mate's, on one side only, must not pull the
+        fit: the offsets' median, not their mean, counts)
+    """
+    from scipy.spatial import cKDTree
+
+    d, j = (tree if tree is not None else cKDTree(target.rim)).query(points, distance_upper_bound=reach)
+    ok = np.isfinite(d)
+    ok[ok] = np.einsum("ij,ij->i", directions[ok], target.rim_directions[j[ok]]) > 0.5
+    ok = np.flatnonzero(ok)
+    j = j[ok]
+    offset = np.abs(np.einsum("ij,ij->i", points[ok] - target.rim[j], target.rim_directions[j]))
+    return ok, j, np.minimum(1.0, RIM_HUBER * tol / np.maximum(offset, 1e-300))
+
+
+def _rim_rows(source: FractureSurface, target: FractureSurface, T: np.ndarray, *, reach: float, tol: float,
+              tree=None):
+    """Weighted point-to-line rows aligning the source's rim with the target's under ``T``
+    (:func:`rim_pairs`); the rims may still slide along their common course.
+
+    Returns
+    -------
+    A : (k, 6) rows for a small motion (rotation vector, translation) of the source
+    b : (k,) right-hand sides
+    weights : (k,) robust weights; None, None, None when either rim is missing or fewer than
+        6 points match
+    """
+    if source.rim is None or target.rim is None or len(source.rim) < 6 or len(target.rim) < 6:
+        return None, None, None
+    p = transform_points(T, source.rim)
+    ok, j, weights = rim_pairs(p, source.rim_directions @ T[:3, :3].T, target, reach=reach, tol=tol, tree=tree)
+    if len(ok) < 6:
+        return None, None, None
+    p, v = p[ok], target.rim_directions[j]
+    return np.hstack([np.cross(p, v), v]), -np.einsum("ij,ij->i", p - target.rim[j], v), weights
 
 
 def estimate_gap(
@@ -451,14 +523,18 @@ def estimate_gap(
                 tree=None, n_points=None, max_gap=max_gap)
 
 
-def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_points, max_gap):
+def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_points, max_gap, rim_reach=0.0,
+         rim_weight=0.1):
     """(T, gap): point-to-plane ICP; when ``max_gap`` > 0 the separation (from 0) is a 7th
     unknown, and the source is matched against the target's samples moved out by the
     current separation (nearest points across a wide gap land on the bumps of a rough
-    surface, which biases the fit towards a smaller gap)."""
+    surface, which biases the fit towards a smaller gap). Rims: :func:`icp`."""
     from scipy.spatial import cKDTree
 
     tree = tree if tree is not None and max_gap == 0 else cKDTree(target.samples)
+    # rims only without a separation to fit (its column would shift their rows too)
+    rim_tree = (cKDTree(target.rim) if rim_reach > 0 and max_gap == 0 and target.rim is not None
+                and len(target.rim) else None)
     gap = 0.0
     cos_tol = np.cos(np.radians(normal_angle))
     T = np.array(T, dtype=float, copy=True)
@@ -474,6 +550,12 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
             p, q = p[ok], target.samples[j[ok]] + gap * n
             A = np.hstack([np.cross(p, n), n])
             b = -np.einsum("ij,ij->i", p - q, n)
+            if rim_tree is not None and level == levels[-1]:
+                A_rim, b_rim, weights = _rim_rows(source, target, T, reach=rim_reach * level * tol, tol=tol,
+                                                  tree=rim_tree)
+                if A_rim is not None:  # rim_weight times the contact rows' weight in all
+                    w = np.sqrt(rim_weight * len(A) * weights / weights.sum())[:, None]
+                    A, b = np.vstack([A, w * A_rim]), np.concatenate([b, w[:, 0] * b_rim])
             moved = 0.0
             if max_gap > 0:  # the separation grows by x[6]: (p - q) n + A x - x[6] = 0
                 x = np.linalg.lstsq(np.hstack([A, -np.ones((len(A), 1))]), b, rcond=None)[0]
@@ -864,7 +946,8 @@ def register_pair(
         for _, i, coarse in ranked[: params.refinements * slots]:
             if added == slots:
                 break
-            refined = icp(source, target, coarse, tol=tol, normal_angle=params.normal_angle, tree=tree)
+            refined = icp(source, target, coarse, tol=tol, normal_angle=params.normal_angle, tree=tree,
+                          rim_reach=params.rim_reach, rim_weight=params.rim_weight)
             if _distinct(np.array([c.T_target_source for c in candidates] + [refined]), len(candidates) + 1,
                          tol=rtol)[-1:] != [len(candidates)]:
                 continue
@@ -884,6 +967,6 @@ def register_pair(
 
 __all__ = [
     "Candidate", "PairResult", "RegistrationParams", "contact_rms", "contact_score", "correspondences", "estimate_gap", "frame_hypotheses", "contact_relief", "icp",
-    "kabsch", "opposed_neighbours", "ransac", "register_pair", "seam_continuity", "set_gap", "touching_samples",
+    "kabsch", "opposed_neighbours", "ransac", "register_pair", "rim_pairs", "seam_continuity", "set_gap", "touching_samples",
     "with_noise",
 ]

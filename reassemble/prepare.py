@@ -240,7 +240,10 @@ def fracture_features(described: DescribedSet, segs: list, thickness: dict[int, 
                                     signature_radii=n_signature, rng=rng)
             if shell and len(surf.keypoints):
                 n, t = strip_frames(v, f, thickness[k], surf.keypoints, surf.keypoint_normals)
-                surf = dataclasses.replace(surf, keypoint_normals=n, keypoint_tangents=t)
+                # no rims: a strip's two rims are its wall edges, a wall thickness apart (a
+                # few tolerances), and its frames already fix where along it a mate lies
+                surf = dataclasses.replace(surf, keypoint_normals=n, keypoint_tangents=t, rim=None,
+                                           rim_directions=None, rim_lengths=None)
             if surf.fracture_area == 0.0:
                 notes[name] = "no fracture surface found; it can only be placed by others"
                 log.warning("%s: %s", name, notes[name])

@@ -59,6 +59,7 @@ def test_one_keypoint_pair_recovers_a_known_motion(bowl, rng):
     frags, size = prepare_fragments({"a": (va, puzzle.meshes[a].faces),
                                      "b": (puzzle.meshes[b].vertices, puzzle.meshes[b].faces)}, seed=0)
     assert all(f.shell for f in frags) and frags[0].surface.keypoint_tangents is not None
+    assert all(f.surface.rim is None for f in frags)  # a strip's rims are its wall edges: not aligned
     res = match_pairs(frags, size=size, params=registration_params(frags, size=size), seed=0)[(0, 1)]
     T_true = invert_transform(T_world[b]) @ T_world[a] @ invert_transform(T_moved_a)
     T = res.best.T_target_source
@@ -78,3 +79,4 @@ def test_thin_walls_can_be_turned_off(bowl):
     frags, _ = prepare_fragments({n: (puzzle.meshes[n].vertices, puzzle.meshes[n].faces) for n in two},
                                  config=Config(thin_walls=False), seed=0)
     assert not any(f.shell for f in frags) and all(f.surface.keypoint_tangents is None for f in frags)
+    assert all(f.surface.rim is not None for f in frags)

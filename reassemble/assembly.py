@@ -452,7 +452,8 @@ def _normal_equations(pairs: list[tuple[int, int]], pts: list[np.ndarray], nrm: 
     distance : matches further apart are ignored
     cos_tol : matched normals must be opposed within this cosine
     gap : separation kept between mating surfaces
-    rims : per fragment, its rim in the common frame (:func:`_placed_rim`), or None: each
+    rims : per fragment, its rim points, their directions (common frame) and a cKDTree of the
+        points, or None: each
         touching pair's rim points also count, along the direction across the other's matched
         rim point (:func:`registration.rim_pairs` within ``rim_reach``, robust weights on the
         scale of ``tol``), with ``rim_weight`` times the weight of the pair's contact rows in all
@@ -476,19 +477,10 @@ def _normal_equations(pairs: list[tuple[int, int]], pts: list[np.ndarray], nrm: 
         rows += int(ok.sum())
         if rims is None or rims[p] is None or rims[q] is None:
             continue
-        (P, U), (target, tree) = rims[p][:2], rims[q][2:]
-        on, k, w = rim_pairs(P, U, target, reach=rim_reach, tol=tol, tree=tree)
-        if len(on) >= 6:
-            _accumulate(AtA, Atb, col, p, q, P[on], target.rim[k], target.rim_directions[k],
-                        weight=rim_weight * float(ok.sum()) * w / w.sum())
+        P, Q, V, w = rim_pairs(*rims[p][:2], *rims[q][:2], reach=rim_reach, tol=tol, tree=rims[q][2])
+        if len(P) >= 6:
+            _accumulate(AtA, Atb, col, p, q, P, Q, V, weight=rim_weight * float(ok.sum()) * w / w.sum())
     return AtA, Atb, rows, touching
-
-
-def _placed_rim(surface: FractureSurface, T: np.ndarray):
-    """(points, directions, the rim as a FractureSurface in the common frame, its cKDTree)."""
-    points, directions = transform_points(T, surface.rim), surface.rim_directions @ T[:3, :3].T
-    moved = dataclasses.replace(surface, rim=points, rim_directions=directions)
-    return points, directions, moved, cKDTree(points)
 
 
 def refine(
@@ -549,7 +541,9 @@ def refine(
             trees = {q: cKDTree(pts[q] + gap * nrm[q]) for q in {q for _, q in pairs}}
             rims = None
             if rim_reach > 0 and distance == levels[-1] * tol:  # once contact has settled
-                rims = [None if s.rim is None or len(s.rim) < 6 else _placed_rim(s, T[k]) for k, s in enumerate(surfaces)]
+                rims = [None if s.rim is None or len(s.rim) < 6 else
+                        (transform_points(T[k], s.rim), s.rim_directions @ T[k][:3, :3].T) for k, s in enumerate(surfaces)]
+                rims = [r if r is None else (*r, cKDTree(r[0])) for r in rims]
             AtA, Atb, rows, touching = _normal_equations(pairs, pts, nrm, trees, col, distance=distance,
                                                          cos_tol=cos_tol, gap=gap, rims=rims,
                                                          rim_reach=rim_reach * distance, rim_weight=rim_weight,

@@ -63,7 +63,6 @@ class FractureSurface:
         midpoints), None where unknown (:func:`rim_points`)
     rim_directions : (r, 3) unit directions across the rim, in the fracture surface, from the
         fracture towards the original surface
-    rim_lengths : (r,) the length of rim each point stands for
     """
 
     keypoints: np.ndarray
@@ -81,7 +80,6 @@ class FractureSurface:
     surface_original: np.ndarray | None = None
     rim: np.ndarray | None = None
     rim_directions: np.ndarray | None = None
-    rim_lengths: np.ndarray | None = None
 
 
 def rim_points(
@@ -111,6 +109,7 @@ def rim_points(
     the outline pins it. Points whose neighbourhood gives no clear direction (a rim shorter
     than ``radius``, or folded on itself) are left out.
     """
+    from scipy.sparse import coo_matrix
     from scipy.spatial import cKDTree
 
     fracture = np.asarray(fracture, bool)
@@ -129,18 +128,19 @@ def rim_points(
     inside = points - vertices[faces[inner]].mean(axis=1)
     across *= np.where(np.einsum("ij,ij->i", across, inside) < 0, -1.0, 1.0)[:, None]
     across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
-    directions = np.zeros_like(points)
-    keep = np.zeros(len(points), bool)
-    for i, hood in enumerate(cKDTree(points).query_ball_point(points, radius)):
-        w = lengths[hood]
-        n = (w[:, None] * normal[hood]).sum(axis=0)
-        n /= max(np.linalg.norm(n), 1e-300)
-        # summed by length, a zigzag's directions add up to its mean course turned by 90 degrees
-        u = (w[:, None] * across[hood]).sum(axis=0)
-        u -= (u @ n) * n
-        norm = np.linalg.norm(u)
-        keep[i] = norm > 0.3 * w.sum()  # a clear course keeps a good part of the summed length
-        directions[i] = u / max(norm, 1e-300)
+    # sums over each point's neighbours within the radius (itself included), as one sparse product
+    close = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    rows = np.concatenate([close[:, 0], close[:, 1], np.arange(len(points))])
+    cols = np.concatenate([close[:, 1], close[:, 0], np.arange(len(points))])
+    near = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(points),) * 2).tocsr()
+    n = near @ (lengths[:, None] * normal)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    # summed by length, a zigzag's directions add up to its mean course turned by 90 degrees
+    u = near @ (lengths[:, None] * across)
+    u -= np.einsum("ij,ij->i", u, n)[:, None] * n
+    norm = np.linalg.norm(u, axis=1)
+    keep = norm > 0.3 * (near @ lengths)  # a clear course keeps a good part of the summed length
+    directions = u / np.maximum(norm, 1e-300)[:, None]
     return points[keep], directions[keep], lengths[keep]
 
 
@@ -234,7 +234,7 @@ def fracture_surface(
     sub = faces[fracture]
     samples, which = sample_surface(vertices, sub, n_samples, rng=rng)
     frac_area = float(area[fracture].sum())
-    rim, rim_directions, rim_lengths = rim_points(vertices, faces, segmentation.fracture, radius=spacing)
+    rim, rim_directions, _ = rim_points(vertices, faces, segmentation.fracture, radius=spacing)
     return FractureSurface(
         keypoints=vertices[faces[keep]].mean(axis=1),
         keypoint_normals=normals,
@@ -250,5 +250,4 @@ def fracture_surface(
         surface_original=~np.asarray(segmentation.fracture, bool)[on_face],
         rim=rim,
         rim_directions=rim_directions,
-        rim_lengths=rim_lengths,
     )

@@ -243,7 +243,7 @@ def fracture_features(described: DescribedSet, segs: list, thickness: dict[int, 
                 # no rims: a strip's two rims are its wall edges, a wall thickness apart (a
                 # few tolerances), and its frames already fix where along it a mate lies
                 surf = dataclasses.replace(surf, keypoint_normals=n, keypoint_tangents=t, rim=None,
-                                           rim_directions=None, rim_lengths=None)
+                                           rim_directions=None)
             if surf.fracture_area == 0.0:
                 notes[name] = "no fracture surface found; it can only be placed by others"
                 log.warning("%s: %s", name, notes[name])

@@ -435,7 +435,7 @@ def icp(
     when given (the samples are in random order). With ``rim_reach`` > 0, at the finest
     threshold the two rims (:func:`features.rim_points`) within ``rim_reach`` times it of each
     other are aligned too, across the rim, with ``rim_weight`` times the contact rows' weight
-    in all (:func:`_rim_rows`): only once contact has settled, so that a rim mislabelled far
+    in all (:func:`rim_pairs`): only once contact has settled, so that a rim mislabelled far
     from its mate's cannot drag a pose out of its basin, and lightly, so that they decide
     only the motions contact leaves free (sliding along a smooth break), not those a rough
     break pins better than labelled rims do.
@@ -447,60 +447,37 @@ def icp(
 RIM_HUBER = 0.25  # rim offsets beyond this many contact tolerances weigh as 1/offset (Huber)
 
 
-def rim_pairs(points: np.ndarray, directions: np.ndarray, target: FractureSurface, *, reach: float, tol: float,
-              tree=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def rim_pairs(points: np.ndarray, directions: np.ndarray, target_points: np.ndarray, target_directions: np.ndarray,
+              *, reach: float, tol: float, tree=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Rim points matched to a mate's rim, for aligning the two across their common course.
 
     Parameters
     ----------
     points, directions : (k, 3) rim points and directions across the rim
         (:func:`features.rim_points`), in the target's frame
-    target : FractureSurface with ``rim`` and ``rim_directions``
+    target_points, target_directions : (t, 3) the mate's
     reach : largest distance to the matched target rim point (mesh units)
     tol : contact tolerance (mesh units), the scale of the robust weights
-    tree : cKDTree of ``target.rim``, when already built
+    tree : cKDTree of ``target_points``, when already built
 
     Returns
     -------
-    ok : (m,) indices of the matched points: the nearest target rim point within ``reach``,
-        its direction within 60 degrees
-    j : (m,) the matched target rim points
-    weights : (m,) robust weights of the offsets ``(p − q)·v`` along the target's direction:
-        1 up to ``RIM_HUBER`` tolerances, then falling as 1/offset (a stretch of rim
-        labelled a tolerance or more off its mate's, on one side only, must not pull the
-        fit: the offsets' median, not their mean, counts)
+    p, q : (m, 3) the matched points and, for each, the nearest target rim point within
+        ``reach`` whose direction agrees within 60 degrees
+    v : (m, 3) that target point's direction: a row of the fit is the offset ``(p − q)·v``
+        (the rims may still slide along their common course)
+    weights : (m,) robust weights of those offsets: 1 up to ``RIM_HUBER`` tolerances, then
+        falling as 1/offset (a stretch of rim labelled a tolerance or more off its mate's, on
+        one side only, must not pull the fit: the offsets' median, not their mean, counts)
     """
     from scipy.spatial import cKDTree
 
-    d, j = (tree if tree is not None else cKDTree(target.rim)).query(points, distance_upper_bound=reach)
+    d, j = (tree if tree is not None else cKDTree(target_points)).query(points, distance_upper_bound=reach)
     ok = np.isfinite(d)
-    ok[ok] = np.einsum("ij,ij->i", directions[ok], target.rim_directions[j[ok]]) > 0.5
-    ok = np.flatnonzero(ok)
-    j = j[ok]
-    offset = np.abs(np.einsum("ij,ij->i", points[ok] - target.rim[j], target.rim_directions[j]))
-    return ok, j, np.minimum(1.0, RIM_HUBER * tol / np.maximum(offset, 1e-300))
-
-
-def _rim_rows(source: FractureSurface, target: FractureSurface, T: np.ndarray, *, reach: float, tol: float,
-              tree=None):
-    """Weighted point-to-line rows aligning the source's rim with the target's under ``T``
-    (:func:`rim_pairs`); the rims may still slide along their common course.
-
-    Returns
-    -------
-    A : (k, 6) rows for a small motion (rotation vector, translation) of the source
-    b : (k,) right-hand sides
-    weights : (k,) robust weights; None, None, None when either rim is missing or fewer than
-        6 points match
-    """
-    if source.rim is None or target.rim is None or len(source.rim) < 6 or len(target.rim) < 6:
-        return None, None, None
-    p = transform_points(T, source.rim)
-    ok, j, weights = rim_pairs(p, source.rim_directions @ T[:3, :3].T, target, reach=reach, tol=tol, tree=tree)
-    if len(ok) < 6:
-        return None, None, None
-    p, v = p[ok], target.rim_directions[j]
-    return np.hstack([np.cross(p, v), v]), -np.einsum("ij,ij->i", p - target.rim[j], v), weights
+    ok[ok] = np.einsum("ij,ij->i", directions[ok], target_directions[j[ok]]) > 0.5
+    p, q, v = points[ok], target_points[j[ok]], target_directions[j[ok]]
+    offset = np.abs(np.einsum("ij,ij->i", p - q, v))
+    return p, q, v, np.minimum(1.0, RIM_HUBER * tol / np.maximum(offset, 1e-300))
 
 
 def estimate_gap(
@@ -533,8 +510,8 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
 
     tree = tree if tree is not None and max_gap == 0 else cKDTree(target.samples)
     # rims only without a separation to fit (its column would shift their rows too)
-    rim_tree = (cKDTree(target.rim) if rim_reach > 0 and max_gap == 0 and target.rim is not None
-                and len(target.rim) else None)
+    rim_tree = (cKDTree(target.rim) if rim_reach > 0 and max_gap == 0 and source.rim is not None
+                and target.rim is not None and len(source.rim) >= 6 and len(target.rim) >= 6 else None)
     gap = 0.0
     cos_tol = np.cos(np.radians(normal_angle))
     T = np.array(T, dtype=float, copy=True)
@@ -551,11 +528,13 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
             A = np.hstack([np.cross(p, n), n])
             b = -np.einsum("ij,ij->i", p - q, n)
             if rim_tree is not None and level == levels[-1]:
-                A_rim, b_rim, weights = _rim_rows(source, target, T, reach=rim_reach * level * tol, tol=tol,
-                                                  tree=rim_tree)
-                if A_rim is not None:  # rim_weight times the contact rows' weight in all
-                    w = np.sqrt(rim_weight * len(A) * weights / weights.sum())[:, None]
-                    A, b = np.vstack([A, w * A_rim]), np.concatenate([b, w[:, 0] * b_rim])
+                pr, qr, v, weights = rim_pairs(transform_points(T, source.rim), source.rim_directions @ T[:3, :3].T,
+                                               target.rim, target.rim_directions, reach=rim_reach * level * tol,
+                                               tol=tol, tree=rim_tree)
+                if len(pr) >= 6:  # rim_weight times the contact rows' weight in all
+                    w = np.sqrt(rim_weight * len(A) * weights / weights.sum())
+                    A = np.vstack([A, w[:, None] * np.hstack([np.cross(pr, v), v])])
+                    b = np.concatenate([b, -w * np.einsum("ij,ij->i", pr - qr, v)])
             moved = 0.0
             if max_gap > 0:  # the separation grows by x[6]: (p - q) n + A x - x[6] = 0
                 x = np.linalg.lstsq(np.hstack([A, -np.ones((len(A), 1))]), b, rcond=None)[0]

@@ -13,9 +13,8 @@ from .test_seams import _half_bar, _surface
 
 
 def _with_rim(v, f, fracture, rng):
-    points, directions, lengths = rim_points(v, f, fracture, radius=0.05)
-    return dataclasses.replace(_surface(v, f, fracture, rng), rim=points, rim_directions=directions,
-                               rim_lengths=lengths)
+    points, directions, _ = rim_points(v, f, fracture, radius=0.05)
+    return dataclasses.replace(_surface(v, f, fracture, rng), rim=points, rim_directions=directions)
 
 
 @pytest.fixture(scope="module")

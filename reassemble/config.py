@@ -25,6 +25,7 @@ from .errors import ReassembleError
 from .features import FeatureParams
 from .files import read_json
 from .registration import RegistrationParams
+from .retrieval import RetrievalParams
 from .segmentation import SegmentParams
 from .synth import BreakParams
 
@@ -54,7 +55,8 @@ class Config:
         number bridges its holes)
     split_bodies : a file holding several separate bodies gives one fragment per body
         (else a file is one rigid piece, :func:`inputs.load_fragments`)
-    describe, segment, features, registration, assembly : the stages' options
+    describe, segment, features, registration, assembly : the stages' options;
+        retrieval : which pairs a large set registers (:mod:`retrieval`)
     break_ : the options of ``reassemble break`` (``break`` in JSON and ``--set``); None in a run
     """
 
@@ -69,11 +71,16 @@ class Config:
     segment: SegmentParams = SegmentParams()
     features: FeatureParams = FeatureParams()
     registration: RegistrationParams = RegistrationParams()
+    retrieval: RetrievalParams = RetrievalParams()
     assembly: AssemblyParams = AssemblyParams()
     break_: BreakParams | None = None
 
     def check(self) -> None:
         """Raise ReassembleError for options that do not fit together."""
+        r = self.retrieval
+        for name in ("partners", "more", "max_partners", "neighbours"):
+            if getattr(r, name) < 1:
+                raise ReassembleError(f"retrieval.{name} must be at least 1, got {getattr(r, name)}")
         n = self.features.signature_radii
         if n is not None and not 1 <= n <= len(self.radii):
             raise ReassembleError(f"features.signature_radii must be 1 to {len(self.radii)} (the descriptor "

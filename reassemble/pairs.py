@@ -89,6 +89,12 @@ def _pair_worker(task):
                                  size=w["size"], params=w["params"], rng=rng)
 
 
+def _pair_index(i: int, j: int, n: int) -> int:
+    """The place of pair (min, max) among all pairs (0, 1), (0, 2), ..., (n - 2, n - 1)."""
+    a, b = min(i, j), max(i, j)
+    return a * n - a * (a + 1) // 2 + b - a - 1
+
+
 def match_pairs(
     fragments: list[PreparedFragment],
     *,
@@ -104,18 +110,21 @@ def match_pairs(
     """Register fragment pairs (all, or the given (source, target) index pairs): PairResult per pair.
 
     ``jobs`` > 1 registers pairs in that many processes; every pair has its own random
-    stream (spawned from ``seed`` in pair order), so results do not depend on ``jobs``, nor
+    stream (spawned from ``seed``, the pair's place among all pairs), so results do not
+    depend on ``jobs``, nor on the other pairs registered, nor
     on ``scheduler`` (the address of a Dask cluster to register them on instead).
     ``params``: default :func:`registration_params` of the fragments (noise-aware tolerance).
     ``memo``: registrations made earlier in the run (:class:`PairMemo`), reused where
     nothing a pair depends on has changed, and the new ones added to it.
     """
     params = params or registration_params(fragments, size=size)
+    n = len(fragments)
     if pairs is None:
-        pairs = [(i, j) for i in range(len(fragments)) for j in range(i + 1, len(fragments))]
-    # every pair's stream spawned in pair order, reused or not: a result never depends on
-    # which other pairs were registered
-    rngs = np.random.default_rng(seed).spawn(len(pairs))
+        pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    # every pair's stream is the one it has among all pairs in order, registered or not: a
+    # result never depends on which other pairs were registered
+    streams = np.random.SeedSequence(seed).spawn(n * (n - 1) // 2)
+    rngs = [np.random.Generator(np.random.PCG64(streams[_pair_index(i, j, n)])) for i, j in pairs]
     surfaces = [f.surface for f in fragments]
     results = {}
     if memo is not None:
@@ -137,9 +146,10 @@ def match_pairs(
 
 def match_set(
     fragments: list[PreparedFragment], *, size: float, params, gap: float | None = None, seed: int = 0,
-    jobs: int = 1, scheduler: str | None = None, progress: bool = False, memo: PairMemo | None = None,
+    pairs: list[tuple[int, int]] | None = None, jobs: int = 1, scheduler: str | None = None, progress: bool = False,
+    memo: PairMemo | None = None,
 ):
-    """Register every pair, with the separation of mating surfaces measured or given.
+    """Register every pair (or the given ones), with the separation of mating surfaces measured or given.
 
     With ``gap`` None, the pairs are registered touching, the separation of the touching
     ones measured (:func:`registration.set_gap`), and when it exceeds the contact
@@ -153,15 +163,15 @@ def match_set(
     """
     if gap is not None:
         params = dataclasses.replace(params, gap=float(gap))
-    results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs, scheduler=scheduler,
-                           progress=progress, memo=memo)
+    results = match_pairs(fragments, size=size, params=params, pairs=pairs, seed=seed, jobs=jobs,
+                          scheduler=scheduler, progress=progress, memo=memo)
     if gap is None:
         measured = set_gap([f.surface for f in fragments], results, size=size, params=params)
         if measured > params.tolerance:
             log.info("mating surfaces are %.3g x size apart (material lost at the break?): matching again with "
                      "that gap", measured)
             params = dataclasses.replace(params, gap=measured)
-            results = match_pairs(fragments, size=size, params=params, seed=seed, jobs=jobs,
+            results = match_pairs(fragments, size=size, params=params, pairs=pairs, seed=seed, jobs=jobs,
                                   scheduler=scheduler, progress=progress, memo=memo)
     return results, params
 

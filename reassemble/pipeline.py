@@ -26,6 +26,7 @@ from .outputs import pairs_json, run_report, write_match_folder, write_run_folde
 from .pairs import PairMemo, match_pairs, match_set, registration_params
 from .prepare import DescribedSet, PreparedFragment, describe_fragments, prepare_fragments, reference_size, thin_walled
 from .puzzle import PuzzleFiles, break_to_folder, evaluate_files, read_puzzle
+from .retrieval import first_pairs, more_pairs, partner_votes
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +57,8 @@ class Result:
         the segmentation kept, whether it is not the first, and each tried assembly's
         whole-surface (contact, penetration) areas over the reference size squared; else None
     fallback_contact : that (contact, penetration) of this assembly, when compared
+    votes : (n, n) partner votes (:func:`retrieval.partner_votes`) when only candidate
+        pairs were registered (``config.retrieval``), else None (every pair was)
     """
 
     config: Config
@@ -68,6 +71,7 @@ class Result:
     timings: dict = dataclasses.field(default_factory=dict)
     fallback: dict | None = None
     fallback_contact: list | None = None
+    votes: np.ndarray | None = None
 
 
 def reassemble(
@@ -82,7 +86,10 @@ def reassemble(
     that work on instead). When the assembly leaves fragments unplaced, the set is
     segmented again, with the planar mates of its break faces labelled too and then with
     ``config.segment.fallback`` evidence, and matched and assembled again; the assembly
-    with most whole-surface contact is kept (:mod:`arbiter`).
+    with most whole-surface contact is kept (:mod:`arbiter`). With
+    ``config.retrieval.min_fragments`` set, a large set registers candidate pairs only;
+    fragments still unplaced in the kept assembly then ask for more partners until placed
+    or registered against every other.
     """
     config.check()
     t0 = time.perf_counter()
@@ -93,8 +100,10 @@ def reassemble(
     result.timings["prepare"] += describing
     if not assemble:
         return result
-    _assemble(result, progress=progress)
+    more = dict(jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)  # asking for more partners
+    _assemble(result, limit=config.retrieval.max_partners, **more)
     if thin_walled(result.fragments):
+        _assemble(result, limit=None, **more)
         return result
     t0, tried = time.perf_counter(), [result]
     for retry in _retries(config):
@@ -107,7 +116,7 @@ def reassemble(
                        memo=memo)
         if again is None:
             continue
-        _assemble(again, progress=progress)
+        _assemble(again, limit=config.retrieval.max_partners, **more)
         tried.append(again)
         result = _better(result, again, config=config)
     if result is not tried[0]:
@@ -118,6 +127,7 @@ def reassemble(
         result.timings = {**tried[0].timings, "fallback": time.perf_counter() - t0}
         result.fallback = {"method": _label(result.config), "kept": result is not tried[0],
                            "contact": {_label(r.config): r.fallback_contact for r in tried}}
+    _assemble(result, limit=None, **more)
     return result
 
 
@@ -153,35 +163,77 @@ def _better(first: Result, second: Result, *, config: Config) -> Result:
 def _match(described: DescribedSet, config: Config, *, jobs: int, scheduler: str | None, progress: bool,
            unless: list[Result] = (), memo: PairMemo | None = None) -> Result | None:
     """The segment, features and pairs steps on a described set; None when the fracture
-    labels are those of a result in ``unless`` (matching them again would change nothing)."""
+    labels are those of a result in ``unless`` (matching them again would change nothing).
+    With ``config.retrieval.min_fragments`` set, a set of that many fragments or more
+    registers only candidate pairs: each fragment's best partners by votes (:mod:`retrieval`)."""
     t0 = time.perf_counter()
     frags, size = prepare_fragments({}, config=config, seed=config.seed, described=described)
     if any(all(np.array_equal(a.segmentation.fracture, b.segmentation.fracture) for a, b in zip(frags, r.fragments)
                if a.segmentation is not None and b.segmentation is not None) for r in unless):
         return None
     registration = registration_params(frags, size=size, params=config.registration)
+    votes = candidates = None
+    if config.retrieval.min_fragments is not None and len(frags) >= config.retrieval.min_fragments:
+        votes = partner_votes([f.surface for f in frags], neighbours=config.retrieval.neighbours)
+        candidates = first_pairs(votes, partners=config.retrieval.partners)
+        log.info("%d fragments: registering %d candidate pairs of %d", len(frags), len(candidates),
+                 len(frags) * (len(frags) - 1) // 2)
     t1 = time.perf_counter()
     pairs, registration = match_set(frags, size=size, params=registration, gap=config.gap, seed=config.seed,
-                                    jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)
+                                    pairs=candidates, jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)
     resolved = dataclasses.replace(config, thin_walls=thin_walled(frags), gap=registration.gap,
                                    registration=registration)
-    return Result(resolved, frags, size, pairs, timings={"prepare": t1 - t0, "pairs": time.perf_counter() - t1})
+    return Result(resolved, frags, size, pairs, timings={"prepare": t1 - t0, "pairs": time.perf_counter() - t1},
+                  votes=votes)
 
 
-def _assemble(result: Result, *, progress: bool) -> None:
-    """The assemble step: global assembly, world poses, touching points of every contact."""
+def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: str | None = None,
+              progress: bool = False, memo: PairMemo | None = None) -> None:
+    """The assemble step: global assembly, world poses, touching points of every contact.
+
+    With candidate pairs only (``result.votes``), a fragment left unplaced asks for its
+    next ``config.retrieval.more`` partners (:func:`retrieval.more_pairs`); they are
+    registered and the set assembled again, until every fragment is placed or has been
+    registered against ``limit`` partners (None: every other). Called again on an
+    assembled result, it only asks for more (and changes nothing when none are asked for).
+    """
     t0 = time.perf_counter()
-    frags, size, config, reg = result.fragments, result.size, result.config, result.config.registration
-    if progress:
+    again = result.assembly is not None
+    frags, size, config = result.fragments, result.size, result.config
+    if progress and not again:
         log.info("assembling %d fragments", len(frags))
     surfaces, meshes = [f.surface for f in frags], [f.mesh for f in frags]
-    result.assembly = assembly.assemble(surfaces, meshes, result.pairs, size=size, params=config.assembly,
-                                        reg_params=reg, seed=config.seed)
+
+    def assemble_now():
+        return assembly.assemble(surfaces, meshes, result.pairs, size=size, params=config.assembly,
+                                 reg_params=config.registration, seed=config.seed)
+
+    if not again:
+        result.assembly = assemble_now()
+    asked = False
+    while result.votes is not None:
+        # a fragment with no fracture keypoints matches nothing (register_pair): no use asking
+        unplaced = [i for i in np.flatnonzero(~result.assembly.placed) if len(frags[i].surface.keypoints) >= 3]
+        new = more_pairs(result.votes, unplaced, set(result.pairs), count=config.retrieval.more, limit=limit)
+        if not new:
+            break
+        asked = True
+        log.info("%d fragments unplaced: registering %d more candidate pairs", len(unplaced), len(new))
+        t1 = time.perf_counter()
+        added = match_pairs(frags, size=size, pairs=new, params=config.registration, seed=config.seed, jobs=jobs,
+                            scheduler=scheduler, progress=progress, memo=memo)
+        result.pairs = dict(sorted({**result.pairs, **added}.items()))
+        result.timings["pairs"] += time.perf_counter() - t1
+        t0 += time.perf_counter() - t1  # the registration counts as pairs, not assembly
+        result.assembly = assemble_now()
+    if again and not asked:
+        return
+    reg = config.registration
     result.T_world = assembly.world_poses(result.assembly, surfaces, gap=config.assembly.world_gap * size)
     result.touching = assembly.contact_points(result.assembly, surfaces, meshes, tol=reg.tolerance * size,
                                               normal_angle=reg.normal_angle, count=config.assembly.touching_points,
                                               gap=reg.gap * size)
-    result.timings["assembly"] = time.perf_counter() - t0
+    result.timings["assembly"] = result.timings.get("assembly", 0.0) * again + time.perf_counter() - t0
 
 
 def _load(inputs, out, *, config: Config, seed: int | None, force: bool):

@@ -2,6 +2,7 @@
 
     python -m benchmarks.speed.scale                              # spot, cells, 10 and 20 pieces
     python -m benchmarks.speed.scale --pieces 10,20,50 --timeout 60 --work /tmp/scale
+    python -m benchmarks.speed.scale --pieces 20,50 --set retrieval.min_fragments=16   # candidate pairs
 
 Each puzzle is ``reassemble break MESH --pieces N --style cells --seed S`` (the style that
 makes 50-200 pieces; a bundled mesh), then ``reassemble run`` on its fragments with
@@ -9,6 +10,7 @@ makes 50-200 pieces; a bundled mesh), then ``reassemble run`` on its fragments w
 twice a second (the peak of the sum of their proportional set sizes: the
 pool's workers count, their shared pages once), then ``reassemble eval``.
 A run over ``--timeout`` minutes is stopped and recorded as not finished, with its time.
+``--set`` options go to every run (``reassemble run --set``), and are in the record.
 The record gives, per n, the seconds of each step (``report.json``), the pairs
 registered, the peak memory and the strict part accuracy, and the slope of log time
 against log n between the smallest and each larger n that finished (issue 23's target:
@@ -67,7 +69,8 @@ def _memory(process) -> int:
         return process.memory_info().rss
 
 
-def one(n: int, *, mesh: str, style: str, seed: int, jobs: int, timeout: float, work: Path) -> dict:
+def one(n: int, *, mesh: str, style: str, seed: int, jobs: int, timeout: float, work: Path,
+        settings: list[str] = ()) -> dict:
     """Break, run and score one puzzle of ``n`` pieces."""
     cli = [sys.executable, "-m", "reassemble"]
     puzzle = work / f"{mesh}_{style}_{n:03d}p_s{seed}"
@@ -76,9 +79,10 @@ def one(n: int, *, mesh: str, style: str, seed: int, jobs: int, timeout: float, 
         subprocess.run(cli + ["break", mesh, "--pieces", str(n), "--style", style, "--seed", str(seed), "--out",
                               str(puzzle)], check=True, capture_output=True)
     breaking = time.perf_counter() - t0
-    out = work / f"{puzzle.name}_run"
+    out = work / (f"{puzzle.name}_run" + "".join(f"_{x}" for x in settings))
     rc, seconds, peak = _watch(cli + ["run", str(puzzle / "fragments"), "--out", str(out), "--force", "--jobs",
-                                      str(jobs), "--seed", str(seed)], timeout=timeout)
+                                      str(jobs), "--seed", str(seed)] + [a for x in settings for a in ("--set", x)],
+                               timeout=timeout)
     row = {"pieces": n, "break_s": breaking, "run_s": seconds, "peak_gb": peak, "finished": rc is not None}
     if rc is None:
         return row
@@ -116,6 +120,8 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--timeout", type=float, default=60.0, help="minutes per run before it is stopped")
     parser.add_argument("--work", type=Path, default=None, help="keep the puzzles and runs here (reused)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.NAME=VALUE",
+                        help="an option of every run (reassemble run --set; repeatable)")
     add_json_option(parser)
     args = parser.parse_args()
     bench = start()
@@ -125,16 +131,18 @@ def main() -> int:
         work.mkdir(parents=True, exist_ok=True)
         for n in sorted(int(x) for x in args.pieces.split(",")):
             row = one(n, mesh=args.mesh, style=args.style, seed=args.seed, jobs=args.jobs,
-                      timeout=60.0 * args.timeout, work=work)
+                      timeout=60.0 * args.timeout, work=work, settings=args.set)
             rows.append(row)
             done = (f"strict {row['strict']:.3f}, {row['placed']} placed, {row['pairs']} pairs, "
                     f"steps {row['timings']}") if row["finished"] else "NOT FINISHED"
             print(f"{n:4d} pieces: run {row['run_s']:7.1f} s, peak {row['peak_gb']:.2f} GB, {done}", flush=True)
     for row, s in zip(rows, slopes(rows)):
         row["slope"] = s
+    options = "".join(f", --set {x}" for x in args.set)
     bench.write(args.json, figures={"mesh": args.mesh, "style": args.style, "seed": args.seed, "jobs": args.jobs,
-                                    "runs": rows},
-                tables=[table(f"reassemble run on {args.mesh} broken into cells (seed {args.seed}), --jobs {args.jobs}",
+                                    "settings": args.set, "runs": rows},
+                tables=[table(f"reassemble run on {args.mesh} broken into cells (seed {args.seed}), --jobs {args.jobs}"
+                              + options,
                               ["pieces", "finished", "run s", "pairs s", "assembly s", "pairs registered",
                                "peak GB", "strict part accuracy", "slope from the smallest"],
                               [[r["pieces"], r["finished"], r["run_s"], r.get("timings", {}).get("pairs"),

@@ -12,7 +12,8 @@ each fragment's best ``k`` (a pair is kept when either side ranks the other), th
 pairs kept and the recall of touching pairs are reported for k = 3 ... 12.
 
 Cues:
-- ``signatures``: every fracture keypoint's mate signature (H flipped) queries its 8
+- ``signatures``: :func:`reassemble.retrieval.partner_votes` (what ``run`` registers
+  first on large sets): every fracture keypoint's mate signature (H flipped) queries its 8
   nearest keypoints of other fragments in one tree; a pair's votes over those expected by
   chance (the fragments' keypoint counts), both ways added;
 - ``facets``: the fracture faces (the run's labels) cut into facets at creases (dihedral
@@ -66,26 +67,6 @@ def recall(S: np.ndarray, share: np.ndarray) -> list[tuple[int, float, float]]:
         np.fill_diagonal(keep, False)
         out.append((k, keep.sum() / (n * (n - 1)), (keep & touching).sum() / max(touching.sum(), 1)))
     return out
-
-
-def signature_cue(surfaces, *, neighbours: int = 8) -> np.ndarray:
-    from scipy.spatial import cKDTree
-
-    from reassemble.features import mate_signature
-
-    sig = [s.signature for s in surfaces]
-    owner = np.concatenate([np.full(len(x), i) for i, x in enumerate(sig)])
-    counts = np.bincount(owner, minlength=len(sig))
-    tree = cKDTree(np.vstack(sig))
-    V = np.zeros((len(sig), len(sig)))
-    for i, x in enumerate(sig):
-        if not len(x):
-            continue
-        _, j = tree.query(mate_signature(x), k=min(neighbours + int(counts[i]), len(owner)))
-        for row in owner[j]:
-            np.add.at(V[i], row[row != i][:neighbours], 1.0)
-        V[i] /= np.maximum(len(x) * neighbours * counts / len(owner), 1e-300)
-    return V + V.T
 
 
 def region_descriptor(centres: np.ndarray, area: np.ndarray) -> np.ndarray:
@@ -164,6 +145,7 @@ def main() -> int:
     bench = start()
     from reassemble.config import Config
     from reassemble.pipeline import prepare_fragments, read_puzzle
+    from reassemble.retrieval import partner_votes
 
     puzzle = read_puzzle(args.puzzle / "ground_truth.json", with_labels=True)
     gt = json.loads((args.puzzle / "ground_truth.json").read_text())
@@ -175,7 +157,7 @@ def main() -> int:
     labels = [np.asarray(puzzle.labels[f.name], bool) if len(puzzle.labels[f.name]) == len(f.faces)
               else f.segmentation.fracture for f in frags]
     cues = {
-        "signatures": lambda: signature_cue([f.surface for f in frags]),
+        "signatures": lambda: partner_votes([f.surface for f in frags]),
         "facets": lambda: region_cue([facets(*f.mesh, f.segmentation.fracture) for f in frags]),
         "facets, true labels": lambda: region_cue([facets(*f.mesh, lab) for f, lab in zip(frags, labels)]),
         "true contact regions": lambda: region_cue(contact_regions(frags, gt, size=size)),

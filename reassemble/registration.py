@@ -717,12 +717,24 @@ def _seam_side(one, other, T_other_one, contact, *, other_scene, reach, tol, par
 
 
 def _inside(scene, points: np.ndarray, tol: float) -> int:
-    """How many points lie deeper than ``tol`` inside the scene's closed mesh."""
+    """How many points lie deeper than ``tol`` inside the scene's closed mesh.
+
+    Notes
+    -----
+    The ray-parity vote first, the distance only for the points inside: Open3D's signed
+    distance is the same distance times the same vote, so this counts exactly the points
+    whose signed distance is below ``-tol``, at a fraction of the cost (most points of a
+    placement are outside).
+    """
     import open3d as o3d
 
     if len(points) == 0:
         return 0
-    return int(np.count_nonzero(scene.compute_signed_distance(o3d.core.Tensor(points.astype(np.float32))).numpy() < -tol))
+    query = points.astype(np.float32)
+    inside = scene.compute_occupancy(o3d.core.Tensor(query)).numpy() > 0.5
+    if not inside.any():
+        return 0
+    return int(np.count_nonzero(scene.compute_distance(o3d.core.Tensor(query[inside])).numpy() > tol))
 
 
 def contact_relief(

@@ -257,3 +257,21 @@ def test_a_retry_registers_again_only_the_pairs_of_changed_fragments(prepared):
         for x, y in zip(again[pair].candidates, fresh[pair].candidates):
             assert np.array_equal(x.T_target_source, y.T_target_source) and x.score == y.score
     assert again[(0, 2)] is not first[(0, 2)]
+
+
+def test_inside_count_equals_the_signed_distance_count():
+    # registration._inside votes first and measures only the points inside: the same count
+    # as Open3D's signed distance below -tol
+    import open3d as o3d
+    import trimesh
+
+    from reassemble.geometry import make_scene
+    from reassemble.registration import _inside
+
+    mesh = trimesh.creation.annulus(r_min=0.5, r_max=1.0, height=0.6)
+    scene = make_scene(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    points = np.random.default_rng(0).uniform(-1.2, 1.2, size=(20000, 3))
+    for tol in (0.0, 0.02, 0.1):
+        signed = scene.compute_signed_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
+        assert _inside(scene, points, tol) == np.count_nonzero(signed < -tol) > 0
+    assert _inside(scene, points[:0], 0.01) == 0

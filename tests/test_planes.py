@@ -63,3 +63,35 @@ def test_the_mates_planes_give_the_true_placement():
     best = min(errors)
     assert best[0] < 1.0 and best[1] < 0.05, errors
     assert len(found) == 2  # distinct principal axes: the true turn and the half turn
+
+
+def test_batched_overlaps_equal_one_turn_at_a_time():
+    # the batched images and FFTs give every turn's overlap and shift exactly as one
+    # histogram2d image and one fftconvolve per turn
+    from scipy.ndimage import gaussian_filter
+    from scipy.signal import fftconvolve
+
+    from reassemble.planes import _overlaps
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(700, 2)) * [1.5, 0.6]
+    b = rng.normal(size=(900, 2)) * [0.6, 1.5]
+    reach = max(np.abs(a).max(), np.abs(b).max())
+    for cells, blur in ((48, False), (150, True)):
+        angles = np.radians(np.arange(0.0, 360.0, 7.0))
+        h = 2 * reach / cells
+        size = cells + 3
+        edges = (np.arange(size + 1) - size / 2) * h
+
+        def image(points):
+            img = (np.histogram2d(points[:, 0], points[:, 1], bins=(edges, edges))[0] > 0).astype(float)
+            return gaussian_filter(img, 1.0) if blur else img
+
+        got = _overlaps(a, b, angles, reach=reach, cells=cells, blur=blur)
+        for (peak, angle, shift), t in zip(got, angles):
+            c, s = np.cos(t), np.sin(t)
+            corr = fftconvolve(image(b), image(a @ np.array([[c, s], [-s, c]]))[::-1, ::-1], mode="full")
+            k = np.unravel_index(int(np.argmax(corr)), corr.shape)
+            assert angle == t and peak == corr[k]
+            if not blur:  # (blurred: the peak is refined between cells)
+                assert np.array_equal(shift, (np.array(k, float) - (size - 1)) * h)

@@ -81,6 +81,8 @@ class Config:
         for name in ("partners", "more", "max_partners", "neighbours"):
             if getattr(r, name) < 1:
                 raise ReassembleError(f"retrieval.{name} must be at least 1, got {getattr(r, name)}")
+        if not 0.0 <= r.confidence <= 1.0:
+            raise ReassembleError(f"retrieval.confidence must be between 0 and 1, got {r.confidence}")
         n = self.features.signature_radii
         if n is not None and not 1 <= n <= len(self.radii):
             raise ReassembleError(f"features.signature_radii must be 1 to {len(self.radii)} (the descriptor "

@@ -194,8 +194,10 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
     With candidate pairs only (``result.votes``), a fragment left unplaced asks for its
     next ``config.retrieval.more`` partners (:func:`retrieval.more_pairs`); they are
     registered and the set assembled again, until every fragment is placed or has been
-    registered against ``limit`` partners (None: every other). Called again on an
-    assembled result, it only asks for more (and changes nothing when none are asked for).
+    registered against ``limit`` partners (None: every other). A placed fragment with
+    less than ``config.retrieval.confidence`` of its break in contact asks too, up to
+    ``config.retrieval.max_partners``. Called again on an assembled result, it only asks
+    for more (and changes nothing when none are asked for).
     """
     t0 = time.perf_counter()
     again = result.assembly is not None
@@ -211,14 +213,22 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
     if not again:
         result.assembly = assemble_now()
     asked = False
+    retrieval = config.retrieval
     while result.votes is not None:
         # a fragment with no fracture keypoints matches nothing (register_pair): no use asking
-        unplaced = [i for i in np.flatnonzero(~result.assembly.placed) if len(frags[i].surface.keypoints) >= 3]
-        new = more_pairs(result.votes, unplaced, set(result.pairs), count=config.retrieval.more, limit=limit)
+        can = np.array([len(f.surface.keypoints) >= 3 for f in frags])
+        placed = result.assembly.placed
+        unplaced = np.flatnonzero(~placed & can)
+        open_break = np.flatnonzero(placed & can & (result.assembly.confidence < retrieval.confidence))
+        registered = set(result.pairs)
+        new = sorted(set(more_pairs(result.votes, unplaced, registered, count=retrieval.more, limit=limit))
+                     | set(more_pairs(result.votes, open_break, registered, count=retrieval.more,
+                                      limit=retrieval.max_partners)))
         if not new:
             break
         asked = True
-        log.info("%d fragments unplaced: registering %d more candidate pairs", len(unplaced), len(new))
+        log.info("%d fragments unplaced, %d placed with most of the break open: registering %d more candidate "
+                 "pairs", len(unplaced), len(open_break), len(new))
         t1 = time.perf_counter()
         added = match_pairs(frags, size=size, pairs=new, params=config.registration, seed=config.seed, jobs=jobs,
                             scheduler=scheduler, progress=progress, memo=memo)

@@ -43,6 +43,10 @@ class RetrievalParams:
         than this, in each segmentation a run tries; the one it keeps asks on, until every
         fragment is placed or registered against every other (:func:`pipeline.reassemble`)
     neighbours : signatures of other fragments each keypoint votes for
+    confidence : a placed fragment with less of its break in contact than this
+        (:attr:`assembly.Assembly.confidence`) asks for more partners too, up to
+        ``max_partners``: in a whole object every break has its mate, so a placed fragment
+        with most of its break open is missing neighbours, or sits where it does not belong
     """
 
     min_fragments: int | None = None
@@ -50,6 +54,7 @@ class RetrievalParams:
     more: int = 4
     max_partners: int = 8
     neighbours: int = 8
+    confidence: float = 0.5
 
 
 def partner_votes(surfaces: list[FractureSurface], *, neighbours: int = 8) -> np.ndarray:

@@ -32,10 +32,9 @@ class RetrievalParams:
     Parameters
     ----------
     min_fragments : sets with at least this many fragments register candidate pairs only;
-        None (the default): every set registers every pair. Not the default because the
-        assembly loses by it where measured: on 20 Voronoi cells of one mesh, 15 of 20
-        placed against 20 of 20 with every pair, in about the same time (the assembly's
-        loop support and its merges of sub-assemblies draw on pairs no fragment asked for)
+        None (the default): every set registers every pair. Opt-in while measured on
+        Voronoi cells only (20 cells of two meshes: the same strict accuracy as every pair,
+        in 0.6 of the time; ``benchmarks/speed/scale.py``)
     partners : each fragment's best partners by votes registered first (a pair is
         registered when either fragment has the other among them)
     more : further partners per round for a fragment the assembly leaves unplaced

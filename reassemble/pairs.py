@@ -123,8 +123,9 @@ def match_pairs(
         pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
     # every pair's stream is the one it has among all pairs in order, registered or not: a
     # result never depends on which other pairs were registered
-    streams = np.random.SeedSequence(seed).spawn(n * (n - 1) // 2)
-    rngs = [np.random.Generator(np.random.PCG64(streams[_pair_index(i, j, n)])) for i, j in pairs]
+    # (the k-th child of SeedSequence(seed).spawn, made alone: its spawn key is (k,))
+    rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(_pair_index(i, j, n),))))
+            for i, j in pairs]
     surfaces = [f.surface for f in fragments]
     results = {}
     if memo is not None:

@@ -78,11 +78,22 @@ def partner_votes(surfaces: list[FractureSurface], *, neighbours: int = 8) -> np
     for i, x in enumerate(sig):
         if not len(x):
             continue
-        # enough neighbours that ``neighbours`` of other fragments remain after i's own
-        _, idx = tree.query(mate_signature(x), k=min(neighbours + int(counts[i]), len(owner)))
-        idx = np.atleast_2d(idx)
-        for row in owner[idx]:
-            np.add.at(V[i], row[row != i][:neighbours], 1.0)
+        query = mate_signature(x)
+        # a few more than ``neighbours``; the rows that found too few of other fragments
+        # (most near i's own keypoints) again with enough to pass all of i's own
+        k = min(2 * neighbours, len(owner))
+        _, idx = tree.query(query, k=k)
+        found = owner[idx.reshape(len(x), -1)]
+        short = np.count_nonzero(found != i, axis=1) < neighbours
+        if short.any() and k < len(owner):
+            _, more = tree.query(query[short], k=min(neighbours + int(counts[i]), len(owner)))
+            votes = [found[~short], owner[more.reshape(int(short.sum()), -1)]]
+        else:
+            votes = [found]
+        for rows in votes:  # each row's first ``neighbours`` of other fragments
+            other = rows != i
+            first = other & (np.cumsum(other, axis=1) <= neighbours)
+            V[i] += np.bincount(rows[first], minlength=n)
         V[i] /= np.maximum(len(x) * neighbours * counts / len(owner), 1e-300)
     np.fill_diagonal(V, 0.0)
     return V + V.T
@@ -108,9 +119,7 @@ def more_pairs(votes: np.ndarray, fragments, registered, *, count: int,
     ``registered`` (a set of (i, j), i < j): the new (i, j), i < j, sorted. With ``limit``,
     a fragment already registered against that many partners asks for none."""
     order = ranked_partners(votes)
-    partners = np.zeros(len(votes), int)
-    for pair in registered:
-        partners[list(pair)] += 1
+    partners = np.bincount(np.array(sorted(registered), int).reshape(-1), minlength=len(votes))
     new: set = set()
     for i in fragments:
         if limit is not None and partners[i] >= limit:

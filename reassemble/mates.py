@@ -30,7 +30,7 @@ class _Plane:
 
 def relabel_planar_mates(
     meshes: list[tuple[np.ndarray, np.ndarray]], segmentations: list[Segmentation], *,
-    tol: float, min_area: float, min_overlap: float, samples: int = 20000, candidates: int = 16,
+    tol: float, min_area: float, min_overlap: float, samples: int = 20000, candidates: int = 16, max_planes: int = 64,
     rng: np.random.Generator,
 ) -> tuple[list[Segmentation], list[int]]:
     """The segmentations with the planar mates of labelled planar break faces labelled fracture.
@@ -46,6 +46,8 @@ def relabel_planar_mates(
     samples : area-uniform surface samples per fragment
     candidates : outlines compared per labelled face: those of the planes of other
         fragments most alike in area and second moments
+    max_planes : at most this many planes per fragment and label, largest first (a CAD
+        part's unlabelled break face can be smaller than a dozen of its design faces)
     rng : numpy Generator
 
     Returns
@@ -76,7 +78,8 @@ def relabel_planar_mates(
             keep = seg.fracture[face] == labelled
             if np.count_nonzero(keep) < 3:
                 continue
-            for p in planar_patches(points[keep], normals[keep], sample_area, tol=tol, min_area=min_area, rng=rng):
+            for p in planar_patches(points[keep], normals[keep], sample_area, tol=tol, min_area=min_area,
+                                    max_patches=max_planes, rng=rng):
                 planes.append(_Plane(k, labelled, p))
     best: dict[int, tuple[float, int]] = {}  # unlabelled plane -> (overlap, labelled plane)
     for i, similar in _nearest_similar(planes, count=candidates):

@@ -65,6 +65,28 @@ def test_the_mates_planes_give_the_true_placement():
     assert len(found) == 2  # distinct principal axes: the true turn and the half turn
 
 
+def test_a_small_face_among_many_larger_ones_is_found():
+    # a CAD part's break face can be smaller than a dozen of its design faces: twelve
+    # squares of area 1 on planes of different directions, and a 0.3 x 0.3 one (under 1 %
+    # of the samples); three random samples fall on it together almost never
+    rng = np.random.default_rng(0)
+    points, normals = [], []
+    directions = [random_rotation(rng) for _ in range(13)]
+    for k, R in enumerate(directions):
+        side = 1.0 if k < 12 else 0.3
+        m = int(round(3000 * side**2))
+        flat = np.column_stack([rng.uniform(0, side, (m, 2)), np.zeros(m)])
+        points.append(flat @ R.T + 5.0 * rng.normal(size=3))
+        normals.append(np.tile(R[:, 2], (m, 1)))
+    points, normals = np.vstack(points), np.vstack(normals)
+    patches = planar_patches(points, normals, 1.0 / 3000, tol=0.005, min_area=0.05, max_patches=16,
+                             rng=np.random.default_rng(1))
+    small = [p for p in patches if abs(p.area - 0.09) < 0.02]
+    assert len(small) == 1, [round(p.area, 3) for p in patches]
+    assert abs(abs(small[0].normal @ directions[12][:, 2]) - 1.0) < 1e-6
+    assert len(patches) == 13
+
+
 def test_batched_overlaps_equal_one_turn_at_a_time():
     # the batched images and FFTs give every turn's overlap and shift exactly as one
     # histogram2d image and one fftconvolve per turn

@@ -187,38 +187,56 @@ def _merge(proposals, state, *, surfaces, scenes, areas, tol, reach, params, reg
     group, poses, members = state
     merges = []
     support = _cycle_support(proposals, surfaces, reach=reach)
+    # a proposal's verdict holds while its two sub-assemblies stay as they are: only those
+    # touching the last merge's are weighed again (lazy greedy; the same merges, in order)
+    stamp = {g: 0 for g in members}
+    verdicts: dict[int, tuple] = {}  # proposal -> (groups, stamps, ok, gain, priority)
     while True:
         best = None
         for x, (i, j, T_j_i, score) in enumerate(proposals):
             a, b = group[i], group[j]
             if a == b:
                 continue
-            # the source's sub-assembly a moves into the frame of the target's, b
-            T_b_a = poses[j] @ T_j_i @ invert_transform(poses[i])
-            moved = {q: T_b_a @ poses[q] for q in members[a]}
-            if len(members[a]) == 1 and len(members[b]) == 1:
-                gain, ok = score, True  # the pair itself, scored by registration
-                priority = score + support[x]
+            seen = verdicts.get(x)
+            if seen is not None and seen[0] == (a, b) and seen[1] == (stamp[a], stamp[b]):
+                ok, gain, priority = seen[2:]
             else:
-                trial = dict(moved)
-                trial.update({p: poses[p] for p in members[b]})
-                scores = _evaluate([(q, p) for q in members[a] for p in members[b]], trial, surfaces, scenes,
-                                   tol=tol, reg_params=reg_params, centres=centres, radii=radii, cache=cache,
-                                   gap=gap)
-                ok = all(pen <= params.max_penetration * min(areas[p], areas[q])
-                         for (q, p), (_, _, pen) in scores.items())
-                gain = priority = sum(s for s, _, _ in scores.values())
+                ok, gain, priority = _weigh(x, proposals[x], state, support, surfaces=surfaces, scenes=scenes,
+                                            areas=areas, tol=tol, params=params, reg_params=reg_params,
+                                            centres=centres, radii=radii, cache=cache, gap=gap)
+                verdicts[x] = ((a, b), (stamp[a], stamp[b]), ok, gain, priority)
             if ok and gain >= params.min_gain and (best is None or priority > best[0]):
-                best = (priority, gain, i, j, moved)
+                best = (priority, gain, i, j, T_j_i)
         if best is None:
             return merges
-        _, gain, i, j, moved = best
+        _, gain, i, j, T_j_i = best
         a, b = group[i], group[j]
-        for q, T in moved.items():
-            poses[q] = T
+        T_b_a = poses[j] @ T_j_i @ invert_transform(poses[i])
+        for q in members[a]:
+            poses[q] = T_b_a @ poses[q]
             group[q] = b
         members[b] += members.pop(a)
+        stamp[b] += 1
         merges.append((i, j, float(gain)))
+
+
+def _weigh(x, proposal, state, support, *, surfaces, scenes, areas, tol, params, reg_params, centres, radii, cache,
+           gap):
+    """(ok, gain, priority) of merging the sub-assemblies of proposal ``x`` (i, j, T_j_i, score)."""
+    group, poses, members = state
+    i, j, T_j_i, score = proposal
+    a, b = group[i], group[j]
+    if len(members[a]) == 1 and len(members[b]) == 1:
+        return True, score, score + support[x]  # the pair itself, scored by registration
+    # the source's sub-assembly a moves into the frame of the target's, b
+    T_b_a = poses[j] @ T_j_i @ invert_transform(poses[i])
+    trial = {q: T_b_a @ poses[q] for q in members[a]}
+    trial.update({p: poses[p] for p in members[b]})
+    scores = _evaluate([(q, p) for q in members[a] for p in members[b]], trial, surfaces, scenes,
+                       tol=tol, reg_params=reg_params, centres=centres, radii=radii, cache=cache, gap=gap)
+    ok = all(pen <= params.max_penetration * min(areas[p], areas[q]) for (q, p), (_, _, pen) in scores.items())
+    gain = sum(s for s, _, _ in scores.values())
+    return ok, gain, gain
 
 
 def group_surface(
@@ -341,7 +359,8 @@ def assemble(
                   params=params, reg_params=reg_params, centres=centres, radii=radii, cache=cache, gap=gap)
     merges = _merge(proposals, state, **common)
     merges += _register_groups(proposals, state, surfaces=surfaces, meshes=meshes, size=size, tol=tol, gap=gap,
-                               params=params, reg_params=reg_params, seed=seed, common=common)
+                               params=params, reg_params=reg_params, seed=seed, common=common,
+                               registered=set(pair_results))
     for g in members.values():
         if len(g) > 1:
             poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
@@ -372,15 +391,32 @@ def assemble(
     return Assembly(poses, group, placed, confidence, contacts, merges)
 
 
-def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, params, reg_params, seed, common):
+def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, params, reg_params, seed, common,
+                     registered):
     """Rounds of registering whole sub-assemblies against each other, each followed by a
-    merge (:func:`_merge`) of every proposal so far; returns the merges made."""
+    merge (:func:`_merge`) of every proposal so far; returns the merges made.
+
+    Two sub-assemblies are registered only when some pair of their members was
+    (``registered``: (i, j) pairs): with every pair registered, as by default, that is any
+    two; with candidate pairs only (:mod:`retrieval`), the sub-assemblies the retrieval
+    links, so the rounds grow with the candidate pairs, not with the square of the groups.
+    """
     from .registration import register_pair
 
     group, poses, members = state
     merges = []
     tried = set()
     rng = np.random.default_rng(seed)
+    linked = {(min(i, j), max(i, j)) for i, j in registered}
+    built: dict = {}  # a sub-assembly's surface and scene, by its members and their poses
+
+    def surface_and_scene(g: list[int]):
+        key = (tuple(g), poses[g].tobytes())
+        if key not in built:
+            built[key] = (group_surface([surfaces[k] for k in g], poses[g], tol=tol, gap=gap),
+                          make_scene(*_union([meshes[k] for k in g], poses[g])))
+        return built[key]
+
     for _ in range(params.group_rounds):
         keys = sorted(members, key=lambda r: min(members[r]))
         new = []
@@ -389,11 +425,11 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
                 a, b = sorted(members[ga]), sorted(members[gb])
                 if len(a) == 1 and len(b) == 1 or (tuple(a), tuple(b)) in tried:
                     continue
+                if not any((min(p, q), max(p, q)) in linked for p in a for q in b):
+                    continue
                 tried.add((tuple(a), tuple(b)))
-                sa = group_surface([surfaces[k] for k in a], poses[a], tol=tol, gap=gap)
-                sb = group_surface([surfaces[k] for k in b], poses[b], tol=tol, gap=gap)
-                scene_a = make_scene(*_union([meshes[k] for k in a], poses[a]))
-                scene_b = make_scene(*_union([meshes[k] for k in b], poses[b]))
+                sa, scene_a = surface_and_scene(a)
+                sb, scene_b = surface_and_scene(b)
                 res = register_pair(sa, sb, source_scene=scene_a, target_scene=scene_b, size=size,
                                     params=reg_params, rng=rng)
                 for c in res.candidates[: params.candidates]:

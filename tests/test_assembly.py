@@ -324,3 +324,91 @@ def test_noisy_cell_break_is_laid_on_its_plane(tmp_path):
     assert report["summary"]["gap"] == 0.0
     s = _score(tmp_path / "out", puzzle)
     assert s["solved"], s
+
+
+def _merge_inputs(prepared):
+    """The 4-piece cow's proposals and merge options, as :func:`assembly.assemble` makes them."""
+    from reassemble import assembly
+    from reassemble.config import Config
+    from reassemble.geometry import make_scene
+    from reassemble.pairs import match_pairs, registration_params
+
+    frags, size = prepared
+    reg = registration_params(frags, size=size)
+    results = match_pairs(frags, size=size, params=reg, seed=0)
+    params = Config().assembly
+    surfaces = [assembly._thinned(f.surface, params.verify_samples) for f in frags]
+    centres, radii = assembly._spheres(surfaces)
+    common = dict(surfaces=surfaces, scenes=[make_scene(*f.mesh) for f in frags],
+                  areas=np.array([s.area for s in surfaces]), tol=reg.tolerance * size,
+                  reach=reg.ransac_tolerance * size, params=params, reg_params=reg, centres=centres, radii=radii,
+                  cache={}, gap=0.0)
+    proposals = [(i, j, c.T_target_source, c.score) for (i, j), r in sorted(results.items())
+                 for c in r.candidates[: params.candidates] if c.score >= params.min_gain]
+    return frags, results, proposals, common
+
+
+def _state(n):
+    return np.arange(n), np.tile(np.eye(4), (n, 1, 1)), {k: [k] for k in range(n)}
+
+
+def test_lazy_merge_makes_the_merges_of_weighing_every_proposal_each_time(prepared):
+    # a proposal's verdict is kept while its two sub-assemblies are unchanged: the merges
+    # and poses must be those of weighing every proposal again after every merge
+    from reassemble import assembly
+
+    frags, _, proposals, common = _merge_inputs(prepared)
+    lazy = _state(len(frags))
+    merges = assembly._merge(proposals, lazy, **common)
+    eager = _state(len(frags))
+    group, poses, members = eager
+    support = assembly._cycle_support(proposals, common["surfaces"], reach=common["reach"])
+    weigh = {k: v for k, v in common.items() if k != "reach"}
+    expected = []
+    while True:
+        best = None
+        for x, (i, j, T_j_i, _) in enumerate(proposals):
+            if group[i] == group[j]:
+                continue
+            ok, gain, priority = assembly._weigh(x, proposals[x], eager, support, **weigh)
+            if ok and gain >= common["params"].min_gain and (best is None or priority > best[0]):
+                best = (priority, gain, i, j, T_j_i)
+        if best is None:
+            break
+        _, gain, i, j, T_j_i = best
+        a, b = group[i], group[j]
+        T_b_a = poses[j] @ T_j_i @ invert_transform(poses[i])
+        for q in members[a]:
+            poses[q] = T_b_a @ poses[q]
+            group[q] = b
+        members[b] += members.pop(a)
+        expected.append((i, j, float(gain)))
+    assert len(expected) >= 2  # sub-assemblies of several fragments were weighed
+    assert merges == expected
+    assert np.array_equal(lazy[0], group) and np.array_equal(lazy[1], poses)
+
+
+def test_only_linked_sub_assemblies_are_registered(prepared, monkeypatch):
+    # with candidate pairs, two sub-assemblies none of whose members were registered
+    # together are not registered against each other
+    from reassemble import assembly, registration
+
+    frags, _, _, common = _merge_inputs(prepared)
+    calls = []
+
+    def register(source, target, **kwargs):
+        calls.append((len(source.samples), len(target.samples)))
+        return registration.PairResult([], False, np.zeros((0, 2), int))
+
+    monkeypatch.setattr(registration, "register_pair", register)
+    group, poses, members = _state(len(frags))
+    group[1] = 0  # fragments 0 and 1 one sub-assembly, 2 and 3 alone
+    members = {0: [0, 1], 2: [2], 3: [3]}
+    kwargs = dict(surfaces=[f.surface for f in frags], meshes=[f.mesh for f in frags], size=prepared[1],
+                  tol=common["tol"], gap=0.0, params=common["params"], reg_params=common["reg_params"], seed=0,
+                  common=common)
+    assembly._register_groups([], (group, poses, members), registered={(0, 1), (1, 2)}, **kwargs)
+    assert len(calls) == 1  # {0, 1} against 2; not against 3, and 2 and 3 are both alone
+    calls.clear()
+    assembly._register_groups([], (group, poses, dict(members)), registered={(0, 1), (1, 2), (3, 0)}, **kwargs)
+    assert len(calls) == 2

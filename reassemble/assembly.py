@@ -210,14 +210,21 @@ def _merge(proposals, state, *, surfaces, scenes, areas, tol, reach, params, reg
         if best is None:
             return merges
         _, gain, i, j, T_j_i = best
-        a, b = group[i], group[j]
-        T_b_a = poses[j] @ T_j_i @ invert_transform(poses[i])
-        for q in members[a]:
-            poses[q] = T_b_a @ poses[q]
-            group[q] = b
-        members[b] += members.pop(a)
-        stamp[b] += 1
+        stamp[_join(state, i, j, T_j_i)] += 1
         merges.append((i, j, float(gain)))
+
+
+def _join(state, i: int, j: int, T_j_i: np.ndarray) -> int:
+    """Merge the sub-assembly of ``i`` into that of ``j`` (in place on ``state``), placing
+    ``i`` at ``T_j_i`` from ``j``; returns the sub-assembly that grew."""
+    group, poses, members = state
+    a, b = group[i], group[j]
+    T_b_a = poses[j] @ T_j_i @ invert_transform(poses[i])
+    for q in members[a]:
+        poses[q] = T_b_a @ poses[q]
+        group[q] = b
+    members[b] += members.pop(a)
+    return b
 
 
 def _weigh(x, proposal, state, support, *, surfaces, scenes, areas, tol, params, reg_params, centres, radii, cache,

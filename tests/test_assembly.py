@@ -361,7 +361,7 @@ def test_lazy_merge_makes_the_merges_of_weighing_every_proposal_each_time(prepar
     lazy = _state(len(frags))
     merges = assembly._merge(proposals, lazy, **common)
     eager = _state(len(frags))
-    group, poses, members = eager
+    group, poses, _ = eager
     support = assembly._cycle_support(proposals, common["surfaces"], reach=common["reach"])
     weigh = {k: v for k, v in common.items() if k != "reach"}
     expected = []
@@ -376,12 +376,7 @@ def test_lazy_merge_makes_the_merges_of_weighing_every_proposal_each_time(prepar
         if best is None:
             break
         _, gain, i, j, T_j_i = best
-        a, b = group[i], group[j]
-        T_b_a = poses[j] @ T_j_i @ invert_transform(poses[i])
-        for q in members[a]:
-            poses[q] = T_b_a @ poses[q]
-            group[q] = b
-        members[b] += members.pop(a)
+        assembly._join(eager, i, j, T_j_i)
         expected.append((i, j, float(gain)))
     assert len(expected) >= 2  # sub-assemblies of several fragments were weighed
     assert merges == expected

@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 
 from .features import FractureSurface
 from .geometry import farthest_points, invert_transform, make_scene, rotation_from_vector, transform_points
+from .parallel import pool_map, worker_state
 from .registration import RegistrationParams, contact_score, opposed_neighbours, rim_pairs, touching_samples
 
 
@@ -323,6 +324,8 @@ def assemble(
     params: AssemblyParams = AssemblyParams(),
     reg_params: RegistrationParams = RegistrationParams(),
     seed: int = 0,
+    jobs: int = 1,
+    scheduler: str | None = None,
 ) -> Assembly:
     """Merge fragments into sub-assemblies from their pairwise candidates, then refine.
 
@@ -340,6 +343,8 @@ def assemble(
     params : AssemblyParams
     reg_params : the RegistrationParams the candidates were scored with (tolerance, weights)
     seed : for the sub-assembly registrations
+    jobs, scheduler : the sub-assembly registrations of a round run in ``jobs`` processes,
+        or on the Dask cluster at ``scheduler`` (the result depends on neither)
 
     Returns
     -------
@@ -367,7 +372,7 @@ def assemble(
     merges = _merge(proposals, state, **common)
     merges += _register_groups(proposals, state, surfaces=surfaces, meshes=meshes, size=size, tol=tol, gap=gap,
                                params=params, reg_params=reg_params, seed=seed, common=common,
-                               registered=set(pair_results))
+                               registered=set(pair_results), jobs=jobs, scheduler=scheduler)
     for g in members.values():
         if len(g) > 1:
             poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
@@ -399,7 +404,7 @@ def assemble(
 
 
 def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, params, reg_params, seed, common,
-                     registered):
+                     registered, jobs=1, scheduler=None):
     """Rounds of registering whole sub-assemblies against each other, each followed by a
     merge (:func:`_merge`) of every proposal so far; returns the merges made.
 
@@ -407,26 +412,27 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
     (``registered``: (i, j) pairs): with every pair registered, as by default, that is any
     two; with candidate pairs only (:mod:`retrieval`), the sub-assemblies the retrieval
     links, so the rounds grow with the candidate pairs, not with the square of the groups.
+    A round's registrations run in ``jobs`` processes (or on the Dask cluster of
+    ``scheduler``); each has its own random stream (:func:`_group_stream`), so the result
+    depends on neither.
     """
-    from .registration import register_pair
 
     group, poses, members = state
     merges = []
     tried = set()
-    rng = np.random.default_rng(seed)
     linked = {(min(i, j), max(i, j)) for i, j in registered}
-    built: dict = {}  # a sub-assembly's surface and scene, by its members and their poses
+    built: dict = {}  # a sub-assembly's surface and mesh, by its members and their poses
 
-    def surface_and_scene(g: list[int]):
+    def surface_and_mesh(g: list[int]):
         key = (tuple(g), poses[g].tobytes())
         if key not in built:
             built[key] = (group_surface([surfaces[k] for k in g], poses[g], tol=tol, gap=gap),
-                          make_scene(*_union([meshes[k] for k in g], poses[g])))
+                          _union([meshes[k] for k in g], poses[g]))
         return built[key]
 
     for _ in range(params.group_rounds):
         keys = sorted(members, key=lambda r: min(members[r]))
-        new = []
+        todo = []
         for x, ga in enumerate(keys):
             for gb in keys[x + 1:]:
                 a, b = sorted(members[ga]), sorted(members[gb])
@@ -435,14 +441,14 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
                 if not any((min(p, q), max(p, q)) in linked for p in a for q in b):
                     continue
                 tried.add((tuple(a), tuple(b)))
-                sa, scene_a = surface_and_scene(a)
-                sb, scene_b = surface_and_scene(b)
-                res = register_pair(sa, sb, source_scene=scene_a, target_scene=scene_b, size=size,
-                                    params=reg_params, rng=rng)
-                for c in res.candidates[: params.candidates]:
-                    # any member pair carries the motion; the merge verifies all of them
-                    new.append((a[0], b[0], invert_transform(poses[b[0]]) @ c.T_target_source @ poses[a[0]],
-                                c.score))
+                todo.append((a, b))
+        tasks = [(*surface_and_mesh(a), *surface_and_mesh(b), _group_stream(seed, a, b)) for a, b in todo]
+        new = []
+        for (a, b), res in zip(todo, pool_map(_group_worker, tasks, jobs=jobs, scheduler=scheduler,
+                                              initializer=_group_worker_init, initargs=(size, reg_params))):
+            for c in res.candidates[: params.candidates]:
+                # any member pair carries the motion; the merge verifies all of them
+                new.append((a[0], b[0], invert_transform(poses[b[0]]) @ c.T_target_source @ poses[a[0]], c.score))
         if not new:
             break
         proposals += new
@@ -451,6 +457,25 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
         if not more:
             break
     return merges
+
+
+def _group_stream(seed: int, a: list[int], b: list[int]) -> np.random.Generator:
+    """The random stream of registering sub-assembly ``a`` against ``b``, made from their
+    members alone (a key of three or more numbers: never a pair's, :func:`pairs.match_pairs`)."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(len(a), *a, *b))))
+
+
+def _group_worker_init(size, reg_params) -> None:
+    worker_state.clear()
+    worker_state.update(size=size, params=reg_params)
+
+
+def _group_worker(task):
+    from .registration import register_pair
+
+    source, source_mesh, target, target_mesh, rng = task
+    return register_pair(source, target, source_scene=make_scene(*source_mesh), target_scene=make_scene(*target_mesh),
+                         size=worker_state["size"], params=worker_state["params"], rng=rng)
 
 
 def _union(meshes: list[tuple[np.ndarray, np.ndarray]], T_group_fragment: np.ndarray):

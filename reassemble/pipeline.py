@@ -208,7 +208,7 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
 
     def assemble_now():
         return assembly.assemble(surfaces, meshes, result.pairs, size=size, params=config.assembly,
-                                 reg_params=config.registration, seed=config.seed)
+                                 reg_params=config.registration, seed=config.seed, jobs=jobs, scheduler=scheduler)
 
     if not again:
         result.assembly = assemble_now()

@@ -407,3 +407,26 @@ def test_only_linked_sub_assemblies_are_registered(prepared, monkeypatch):
     calls.clear()
     assembly._register_groups([], (group, poses, dict(members)), registered={(0, 1), (1, 2), (3, 0)}, **kwargs)
     assert len(calls) == 2
+
+
+def test_sub_assembly_registrations_do_not_depend_on_jobs(prepared):
+    # each registration of two sub-assemblies has its own random stream: in one process or
+    # in two, the same candidates
+    from reassemble import assembly
+
+    frags, _, _, common = _merge_inputs(prepared)
+    found = []
+    for jobs in (1, 2):
+        group, poses, _ = _state(len(frags))
+        group[1] = 0
+        members = {0: [0, 1], 2: [2], 3: [3]}
+        proposals = []
+        assembly._register_groups(proposals, (group, poses, members), surfaces=[f.surface for f in frags],
+                                  meshes=[f.mesh for f in frags], size=prepared[1], tol=common["tol"], gap=0.0,
+                                  params=common["params"], reg_params=common["reg_params"], seed=0,
+                                  common={**common, "cache": {}}, registered={(0, 2), (1, 3)}, jobs=jobs)
+        found.append(proposals)
+    assert len(found[0]) >= 2  # {0, 1} against 2 and against 3
+    assert len(found[0]) == len(found[1])
+    for (i, j, T, s), (i2, j2, T2, s2) in zip(*found):
+        assert (i, j, s) == (i2, j2, s2) and np.array_equal(T, T2)

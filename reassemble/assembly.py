@@ -326,6 +326,7 @@ def assemble(
     seed: int = 0,
     jobs: int = 1,
     scheduler: str | None = None,
+    memo: dict | None = None,
 ) -> Assembly:
     """Merge fragments into sub-assemblies from their pairwise candidates, then refine.
 
@@ -345,6 +346,9 @@ def assemble(
     seed : for the sub-assembly registrations
     jobs, scheduler : the sub-assembly registrations of a round run in ``jobs`` processes,
         or on the Dask cluster at ``scheduler`` (the result depends on neither)
+    memo : sub-assembly registrations of earlier calls with these same surfaces, meshes,
+        sizes and options, by the two sub-assemblies' members and poses; used and added to
+        (an assembly after more pairs were registered forms most sub-assemblies again)
 
     Returns
     -------
@@ -372,7 +376,8 @@ def assemble(
     merges = _merge(proposals, state, **common)
     merges += _register_groups(proposals, state, surfaces=surfaces, meshes=meshes, size=size, tol=tol, gap=gap,
                                params=params, reg_params=reg_params, seed=seed, common=common,
-                               registered=set(pair_results), jobs=jobs, scheduler=scheduler)
+                               registered=set(pair_results), jobs=jobs, scheduler=scheduler,
+                               memo={} if memo is None else memo)
     for g in members.values():
         if len(g) > 1:
             poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
@@ -404,7 +409,7 @@ def assemble(
 
 
 def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, params, reg_params, seed, common,
-                     registered, jobs=1, scheduler=None):
+                     registered, jobs=1, scheduler=None, memo):
     """Rounds of registering whole sub-assemblies against each other, each followed by a
     merge (:func:`_merge`) of every proposal so far; returns the merges made.
 
@@ -414,7 +419,7 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
     links, so the rounds grow with the candidate pairs, not with the square of the groups.
     A round's registrations run in ``jobs`` processes (or on the Dask cluster of
     ``scheduler``); each has its own random stream (:func:`_group_stream`), so the result
-    depends on neither.
+    depends on neither, and one made before (``memo``, by members and poses) is the same.
     """
 
     group, poses, members = state
@@ -442,11 +447,14 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
                     continue
                 tried.add((tuple(a), tuple(b)))
                 todo.append((a, b))
-        tasks = [(*surface_and_mesh(a), *surface_and_mesh(b), _group_stream(seed, a, b)) for a, b in todo]
+        ask = [(a, b) for a, b in todo if _memo_key(a, b, poses) not in memo]
+        tasks = [(*surface_and_mesh(a), *surface_and_mesh(b), _group_stream(seed, a, b)) for a, b in ask]
+        for (a, b), res in zip(ask, pool_map(_group_worker, tasks, jobs=jobs, scheduler=scheduler,
+                                             initializer=_group_worker_init, initargs=(size, reg_params))):
+            memo[_memo_key(a, b, poses)] = res
         new = []
-        for (a, b), res in zip(todo, pool_map(_group_worker, tasks, jobs=jobs, scheduler=scheduler,
-                                              initializer=_group_worker_init, initargs=(size, reg_params))):
-            for c in res.candidates[: params.candidates]:
+        for a, b in todo:
+            for c in memo[_memo_key(a, b, poses)].candidates[: params.candidates]:
                 # any member pair carries the motion; the merge verifies all of them
                 new.append((a[0], b[0], invert_transform(poses[b[0]]) @ c.T_target_source @ poses[a[0]], c.score))
         if not new:
@@ -457,6 +465,12 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
         if not more:
             break
     return merges
+
+
+def _memo_key(a: list[int], b: list[int], poses: np.ndarray) -> tuple:
+    """What a registration of sub-assembly ``a`` against ``b`` depends on beyond the set:
+    their members and poses."""
+    return tuple(a), poses[a].tobytes(), tuple(b), poses[b].tobytes()
 
 
 def _group_stream(seed: int, a: list[int], b: list[int]) -> np.random.Generator:

@@ -59,6 +59,8 @@ class Result:
     fallback_contact : that (contact, penetration) of this assembly, when compared
     votes : (n, n) partner votes (:func:`retrieval.partner_votes`) when only candidate
         pairs were registered (``config.retrieval``), else None (every pair was)
+    groups : the sub-assembly registrations of this result's assemblies, for the next
+        assembly after more pairs are registered to reuse (``assembly.assemble``'s ``memo``)
     """
 
     config: Config
@@ -72,6 +74,7 @@ class Result:
     fallback: dict | None = None
     fallback_contact: list | None = None
     votes: np.ndarray | None = None
+    groups: dict = dataclasses.field(default_factory=dict, repr=False)
 
 
 def reassemble(
@@ -208,7 +211,8 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
 
     def assemble_now():
         return assembly.assemble(surfaces, meshes, result.pairs, size=size, params=config.assembly,
-                                 reg_params=config.registration, seed=config.seed, jobs=jobs, scheduler=scheduler)
+                                 reg_params=config.registration, seed=config.seed, jobs=jobs, scheduler=scheduler,
+                                 memo=result.groups)
 
     if not again:
         result.assembly = assemble_now()

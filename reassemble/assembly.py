@@ -425,7 +425,6 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
     group, poses, members = state
     merges = []
     tried = set()
-    linked = {(min(i, j), max(i, j)) for i, j in registered}
     built: dict = {}  # a sub-assembly's surface and mesh, by its members and their poses
 
     def surface_and_mesh(g: list[int]):
@@ -437,13 +436,15 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
 
     for _ in range(params.group_rounds):
         keys = sorted(members, key=lambda r: min(members[r]))
+        # the sub-assemblies a registered pair links, once per round (not member by member)
+        linked = {(min(group[i], group[j]), max(group[i], group[j])) for i, j in registered if group[i] != group[j]}
         todo = []
         for x, ga in enumerate(keys):
             for gb in keys[x + 1:]:
                 a, b = sorted(members[ga]), sorted(members[gb])
                 if len(a) == 1 and len(b) == 1 or (tuple(a), tuple(b)) in tried:
                     continue
-                if not any((min(p, q), max(p, q)) in linked for p in a for q in b):
+                if (min(ga, gb), max(ga, gb)) not in linked:
                     continue
                 tried.add((tuple(a), tuple(b)))
                 todo.append((a, b))

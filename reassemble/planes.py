@@ -90,7 +90,7 @@ def planar_patches(
     from scipy.spatial import cKDTree
 
     # local seeds: a sample and two of its nearest neighbours, on one face almost surely
-    near = cKDTree(points).query(points, k=min(_LOCAL_SEED_NEIGHBOURS, len(points)))[1]
+    tree, k = cKDTree(points), min(_LOCAL_SEED_NEIGHBOURS, len(points))
     misses = 0
     while len(out) < max_patches and np.count_nonzero(free) * sample_area >= min_area and misses < _MISSES:
         pool = np.flatnonzero(free)
@@ -98,7 +98,7 @@ def planar_patches(
             break
         tri = pool[rng.integers(0, len(pool), size=(seeds, 3))]
         local = seeds // 2
-        hood = near[tri[:local, 0]]
+        hood = tree.query(points[tri[:local, 0]], k=k)[1].reshape(local, k)  # only the seeds' neighbours
         # neighbours still in the pool, drawn at random (a used one: keep the global draw)
         pick = hood[np.arange(local)[:, None], rng.integers(1, hood.shape[1], size=(local, 2))]
         tri[:local, 1:] = np.where(free[pick], pick, tri[:local, 1:])

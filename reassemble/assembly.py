@@ -43,6 +43,9 @@ class AssemblyParams:
         interpenetrate by more than this share of the smaller one's surface area
     refine_iterations : joint point-to-plane iterations per sub-assembly
     group_rounds : rounds of registering whole sub-assemblies against each other
+    starts : greedy merging is run from this many first merges (the best proposals of two
+        lone fragments, in order) and the outcome with the largest verified total kept
+        (:func:`_merge_from_starts`); 1: plain greedy
     verify_samples : samples per fragment when verifying a merge
     refine_levels : distance thresholds of the joint refinement, coarse to fine, multiples of
         the contact tolerance (:func:`refine`); refine_samples : fracture samples per fragment it uses
@@ -59,6 +62,7 @@ class AssemblyParams:
     max_penetration: float = 0.02
     refine_iterations: int = 15
     group_rounds: int = 3
+    starts: int = 4
     verify_samples: int = 1000
     refine_levels: tuple[float, ...] = (2.0, 1.0)
     refine_samples: int = 1500
@@ -179,15 +183,67 @@ def _cycle_support(proposals, surfaces, *, reach: float, points: int = 32) -> np
     return support
 
 
-def _merge(proposals, state, *, surfaces, scenes, areas, tol, reach, params, reg_params, centres, radii, cache, gap):
+def _merge_from_starts(proposals, state, *, starts: int, common: dict):
+    """Greedy merging (:func:`_merge`) from up to ``starts`` first merges, in place on
+    ``state``: the outcome whose sub-assemblies have the largest verified total (the sum of
+    the scores of every two fragments placed together, :func:`_total`); returns its merges.
+
+    Notes
+    -----
+    Greedy merging commits to the best-scored pair first. A placement that keeps full
+    contact while sliding or turning on its mate (a round or near-planar break face) can
+    outscore the true one by a little, and a wrong first merge then rules out the loop
+    that the true poses close: the third fragment can no longer touch both. The true
+    assembly closes every loop, so every contact of the object adds to its total, whatever
+    the break; a wrong start loses at least the contacts it prevents. The starts are the
+    best first merges in greedy order (the first is plain greedy, kept on a tie). Huang et
+    al. 2006 (Sec. 6) search the space of consistent merges the same way, by verified
+    contact over the loops.
+    """
+    group, poses, members = state
+    support = _cycle_support(proposals, common["surfaces"], reach=common["reach"])
+    lone = [x for x, (i, j, _, _) in enumerate(proposals) if len(members[group[i]]) == 1 and
+            len(members[group[j]]) == 1 and group[i] != group[j]]
+    firsts = sorted(lone, key=lambda x: (-(proposals[x][3] + support[x]), x))[: max(1, starts)]
+    if len(firsts) < 2:
+        return _merge(proposals, state, support=support, **common)
+    best = None
+    for x in firsts:
+        trial = (group.copy(), poses.copy(), {g: list(m) for g, m in members.items()})
+        i, j, T_j_i, score = proposals[x]
+        _join(trial, i, j, T_j_i)
+        merges = [(i, j, float(score))] + _merge(proposals, trial, support=support, **common)
+        total = _total(trial, **common)
+        if best is None or total > best[0] + 1e-9:
+            best = (total, trial, merges)
+    _, (g, p, m), merges = best
+    group[:], poses[:] = g, p
+    members.clear()
+    members.update(m)
+    return merges
+
+
+def _total(state, *, surfaces, scenes, tol, reg_params, centres, radii, cache, gap, **_) -> float:
+    """The sum of the verified scores of every two fragments in one sub-assembly."""
+    group, poses, members = state
+    pairs = [(p, q) for g in members.values() for x, p in enumerate(sorted(g)) for q in sorted(g)[x + 1:]]
+    scores = _evaluate(pairs, poses, surfaces, scenes, tol=tol, reg_params=reg_params, centres=centres, radii=radii,
+                       cache=cache, gap=gap)
+    return float(sum(s for s, _, _ in scores.values()))
+
+
+def _merge(proposals, state, *, surfaces, scenes, areas, tol, reach, params, reg_params, centres, radii, cache, gap,
+           support=None):
     """Greedy verified merging (in place on ``state``); returns the merges made.
 
     Two lone fragments' merge is ranked by its pair score plus the support of the loops
-    that close through it (:func:`_cycle_support`); any other merge by its verified gain.
+    that close through it (:func:`_cycle_support`, or ``support`` given for these
+    proposals); any other merge by its verified gain.
     """
     group, poses, members = state
     merges = []
-    support = _cycle_support(proposals, surfaces, reach=reach)
+    if support is None or len(support) != len(proposals):
+        support = _cycle_support(proposals, surfaces, reach=reach)
     # a proposal's verdict holds while its two sub-assemblies stay as they are: only those
     # touching the last merge's are weighed again (lazy greedy; the same merges, in order)
     stamp = {g: 0 for g in members}
@@ -373,7 +429,7 @@ def assemble(
     quick = [_thinned(s, params.verify_samples) for s in surfaces]
     common = dict(surfaces=quick, scenes=scenes, areas=areas, tol=tol, reach=reg_params.ransac_tolerance * size,
                   params=params, reg_params=reg_params, centres=centres, radii=radii, cache=cache, gap=gap)
-    merges = _merge(proposals, state, **common)
+    merges = _merge_from_starts(proposals, state, starts=params.starts, common=common)
     merges += _register_groups(proposals, state, surfaces=surfaces, meshes=meshes, size=size, tol=tol, gap=gap,
                                params=params, reg_params=reg_params, seed=seed, common=common,
                                registered=set(pair_results), jobs=jobs, scheduler=scheduler,

@@ -436,3 +436,38 @@ def test_sub_assembly_registrations_do_not_depend_on_jobs(prepared):
     assert len(found[0]) == len(found[1])
     for (i, j, T, s), (i2, j2, T2, s2) in zip(*found):
         assert (i, j, s) == (i2, j2, s2) and np.array_equal(T, T2)
+
+
+def test_a_wrong_first_merge_is_undone_by_another_start(prepared, puzzle):
+    # a decoy that outscores every true placement of its pair is merged first by plain
+    # greedy and blocks the loops through it; another start closes them (every true contact
+    # adds to the total) and keeps the true poses
+    from reassemble import assembly
+    from reassemble.geometry import transform_points
+
+    frags, _, _, common = _merge_inputs(prepared)
+    T = [np.asarray(puzzle.ground_truth["fragments"][f.name]["transform"]) for f in frags]
+    n = len(frags)
+    truth = [(i, j, invert_transform(T[j]) @ T[i], 0.4) for i in range(n) for j in range(i + 1, n)]
+    c = frags[0].surface.surface.mean(axis=0)
+    R = _axis_angle(np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2]), np.radians(25.0))
+    turn = make_transform(R, c - R @ c)
+    decoy = (0, 1, truth[0][2] @ turn, 5.0)  # fragment 0 turned 25 degrees about its break's centre
+    proposals = [decoy] + truth
+
+    def placed_right(state):
+        group, poses, _ = state
+        if len(set(group)) != 1:
+            return False
+        pts = frags[0].surface.surface
+        T_1_0 = invert_transform(poses[1]) @ poses[0]
+        return np.abs(transform_points(T_1_0, pts) - transform_points(truth[0][2], pts)).max() < 1e-6 * prepared[1]
+
+    greedy = _state(n)
+    merges = assembly._merge_from_starts(list(proposals), greedy, starts=1, common={**common, "cache": {}})
+    assert merges[0][:2] == (0, 1) and not placed_right(greedy)  # the decoy first: the test can fail
+    starts = _state(n)
+    assembly._merge_from_starts(list(proposals), starts, starts=4, common={**common, "cache": {}})
+    assert placed_right(starts)
+    assert all(np.allclose(invert_transform(starts[1][j]) @ starts[1][i], invert_transform(T[j]) @ T[i], atol=1e-6)
+               for i in range(n) for j in range(n))

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .features import FractureSurface
+from .features import FractureSurface, same_surface
 from .geometry import farthest_points, invert_transform, make_scene, rotation_from_vector, transform_points
 from .parallel import pool_map, worker_state
 from .registration import RegistrationParams, contact_score, opposed_neighbours, rim_pairs, touching_samples
@@ -382,7 +382,7 @@ def assemble(
     seed: int = 0,
     jobs: int = 1,
     scheduler: str | None = None,
-    memo: dict | None = None,
+    memo: GroupMemo | None = None,
 ) -> Assembly:
     """Merge fragments into sub-assemblies from their pairwise candidates, then refine.
 
@@ -402,9 +402,10 @@ def assemble(
     seed : for the sub-assembly registrations
     jobs, scheduler : the sub-assembly registrations of a round run in ``jobs`` processes,
         or on the Dask cluster at ``scheduler`` (the result depends on neither)
-    memo : sub-assembly registrations of earlier calls with these same surfaces, meshes,
-        sizes and options, by the two sub-assemblies' members and poses; used and added to
-        (an assembly after more pairs were registered forms most sub-assemblies again)
+    memo : GroupMemo of sub-assembly registrations made by earlier calls (with the same
+        meshes, size and seed); used and added to. An assembly after more pairs were
+        registered, or after a new segmentation that left some fragments' surfaces as they
+        were, forms many of the same sub-assemblies again
 
     Returns
     -------
@@ -433,7 +434,7 @@ def assemble(
     merges += _register_groups(proposals, state, surfaces=surfaces, meshes=meshes, size=size, tol=tol, gap=gap,
                                params=params, reg_params=reg_params, seed=seed, common=common,
                                registered=set(pair_results), jobs=jobs, scheduler=scheduler,
-                               memo={} if memo is None else memo)
+                               memo=GroupMemo() if memo is None else memo)
     for g in members.values():
         if len(g) > 1:
             poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
@@ -504,14 +505,16 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
                     continue
                 tried.add((tuple(a), tuple(b)))
                 todo.append((a, b))
-        ask = [(a, b) for a, b in todo if _memo_key(a, b, poses) not in memo]
+        found = {(tuple(a), tuple(b)): memo.get(a, b, poses, surfaces, reg_params) for a, b in todo}
+        ask = [(a, b) for a, b in todo if found[(tuple(a), tuple(b))] is None]
         tasks = [(*surface_and_mesh(a), *surface_and_mesh(b), _group_stream(seed, a, b)) for a, b in ask]
         for (a, b), res in zip(ask, pool_map(_group_worker, tasks, jobs=jobs, scheduler=scheduler,
                                              initializer=_group_worker_init, initargs=(size, reg_params))):
-            memo[_memo_key(a, b, poses)] = res
+            memo.put(a, b, poses, surfaces, reg_params, res)
+            found[(tuple(a), tuple(b))] = res
         new = []
         for a, b in todo:
-            for c in memo[_memo_key(a, b, poses)].candidates[: params.candidates]:
+            for c in found[(tuple(a), tuple(b))].candidates[: params.candidates]:
                 # any member pair carries the motion; the merge verifies all of them
                 new.append((a[0], b[0], invert_transform(poses[b[0]]) @ c.T_target_source @ poses[a[0]], c.score))
         if not new:
@@ -524,10 +527,33 @@ def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, para
     return merges
 
 
-def _memo_key(a: list[int], b: list[int], poses: np.ndarray) -> tuple:
-    """What a registration of sub-assembly ``a`` against ``b`` depends on beyond the set:
-    their members and poses."""
-    return tuple(a), poses[a].tobytes(), tuple(b), poses[b].tobytes()
+@dataclass
+class GroupMemo:
+    """Registrations of one sub-assembly against another, made by earlier assemblies of a
+    run, for later ones to reuse.
+
+    A registration depends on the two sub-assemblies' members, their poses, the members'
+    fracture surfaces and the registration options (the meshes, size and seed are a run's
+    own); the random stream is made from the members (:func:`_group_stream`). An entry is
+    keyed by members, poses and options and checked against the members' surfaces, array by
+    array, so a retry with new fracture labels reuses exactly the registrations of
+    sub-assemblies whose members kept theirs.
+    """
+
+    entries: dict = field(default_factory=dict)  # key -> (member surfaces, PairResult)
+
+    @staticmethod
+    def _key(a: list[int], b: list[int], poses: np.ndarray, reg_params) -> tuple:
+        return tuple(a), poses[a].tobytes(), tuple(b), poses[b].tobytes(), reg_params
+
+    def get(self, a: list[int], b: list[int], poses: np.ndarray, surfaces: list, reg_params):
+        hit = self.entries.get(self._key(a, b, poses, reg_params))
+        if hit is None or not all(same_surface(x, surfaces[k]) for x, k in zip(hit[0], [*a, *b])):
+            return None
+        return hit[1]
+
+    def put(self, a: list[int], b: list[int], poses: np.ndarray, surfaces: list, reg_params, result) -> None:
+        self.entries[self._key(a, b, poses, reg_params)] = ([surfaces[k] for k in [*a, *b]], result)
 
 
 def _group_stream(seed: int, a: list[int], b: list[int]) -> np.random.Generator:

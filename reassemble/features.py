@@ -251,3 +251,21 @@ def fracture_surface(
         rim=rim,
         rim_directions=rim_directions,
     )
+
+
+def same_surface(a, b) -> bool:
+    """Whether two surfaces (dataclasses of arrays, as :class:`FractureSurface`) hold the
+    same values, array by array: what a registration made on one would make on the other."""
+    if a is b:
+        return True
+    if type(a) is not type(b):
+        return False
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            if not (isinstance(x, np.ndarray) and isinstance(y, np.ndarray) and x.dtype == y.dtype
+                    and np.array_equal(x, y)):
+                return False
+        elif x != y:
+            return False
+    return True

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
+from .features import same_surface
 from .geometry import make_scene
 from .parallel import pool_map, worker_state
 from .prepare import PreparedFragment, set_noise, thin_walled
@@ -49,28 +50,12 @@ class PairMemo:
 
     def get(self, i: int, j: int, params, surfaces: list):
         hit = self.entries.get((i, j, params))
-        if hit is None or not (_same_surface(hit[0], surfaces[i]) and _same_surface(hit[1], surfaces[j])):
+        if hit is None or not (same_surface(hit[0], surfaces[i]) and same_surface(hit[1], surfaces[j])):
             return None
         return hit[2]
 
     def put(self, i: int, j: int, params, surfaces: list, result) -> None:
         self.entries[(i, j, params)] = (surfaces[i], surfaces[j], result)
-
-
-def _same_surface(a, b) -> bool:
-    if a is b:
-        return True
-    if type(a) is not type(b):
-        return False
-    for f in dataclasses.fields(a):
-        x, y = getattr(a, f.name), getattr(b, f.name)
-        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
-            if not (isinstance(x, np.ndarray) and isinstance(y, np.ndarray) and x.dtype == y.dtype
-                    and np.array_equal(x, y)):
-                return False
-        elif x != y:
-            return False
-    return True
 
 
 def _pair_worker_init(surfaces, meshes, size, params) -> None:

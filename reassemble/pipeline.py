@@ -59,8 +59,6 @@ class Result:
     fallback_contact : that (contact, penetration) of this assembly, when compared
     votes : (n, n) partner votes (:func:`retrieval.partner_votes`) when only candidate
         pairs were registered (``config.retrieval``), else None (every pair was)
-    groups : the sub-assembly registrations of this result's assemblies, for the next
-        assembly after more pairs are registered to reuse (``assembly.assemble``'s ``memo``)
     """
 
     config: Config
@@ -74,7 +72,6 @@ class Result:
     fallback: dict | None = None
     fallback_contact: list | None = None
     votes: np.ndarray | None = None
-    groups: dict = dataclasses.field(default_factory=dict, repr=False)
 
 
 def reassemble(
@@ -99,11 +96,12 @@ def reassemble(
     described = describe_fragments(meshes, config=config, jobs=jobs, scheduler=scheduler, progress=progress)
     describing = time.perf_counter() - t0
     memo = PairMemo()  # a retry registers again only the pairs a relabelled fragment is in
+    groups = assembly.GroupMemo()  # ... and sub-assemblies of relabelled fragments
     result = _match(described, config, jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)
     result.timings["prepare"] += describing
     if not assemble:
         return result
-    more = dict(jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)  # asking for more partners
+    more = dict(jobs=jobs, scheduler=scheduler, progress=progress, memo=memo, groups=groups)
     _assemble(result, limit=config.retrieval.max_partners, **more)
     if thin_walled(result.fragments):
         _assemble(result, limit=None, **more)
@@ -191,7 +189,8 @@ def _match(described: DescribedSet, config: Config, *, jobs: int, scheduler: str
 
 
 def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: str | None = None,
-              progress: bool = False, memo: PairMemo | None = None) -> None:
+              progress: bool = False, memo: PairMemo | None = None,
+              groups: assembly.GroupMemo | None = None) -> None:
     """The assemble step: global assembly, world poses, touching points of every contact.
 
     With candidate pairs only (``result.votes``), a fragment left unplaced asks for its
@@ -212,7 +211,7 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
     def assemble_now():
         return assembly.assemble(surfaces, meshes, result.pairs, size=size, params=config.assembly,
                                  reg_params=config.registration, seed=config.seed, jobs=jobs, scheduler=scheduler,
-                                 memo=result.groups)
+                                 memo=groups)
 
     if not again:
         result.assembly = assemble_now()

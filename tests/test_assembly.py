@@ -1,5 +1,6 @@
 """Global assembly and `reassemble run`: the smoke set solved, outputs, strays, determinism."""
 
+import dataclasses
 import json
 import shutil
 
@@ -402,7 +403,7 @@ def test_only_linked_sub_assemblies_are_registered(prepared, monkeypatch):
     kwargs = dict(surfaces=[f.surface for f in frags], meshes=[f.mesh for f in frags], size=prepared[1],
                   tol=common["tol"], gap=0.0, params=common["params"], reg_params=common["reg_params"], seed=0,
                   common=common)
-    memo = {}
+    memo = assembly.GroupMemo()
     assembly._register_groups([], (group, poses, dict(members)), registered={(0, 1), (1, 2)}, memo=memo, **kwargs)
     assert len(calls) == 1  # {0, 1} against 2; not against 3, and 2 and 3 are both alone
     calls.clear()
@@ -410,9 +411,17 @@ def test_only_linked_sub_assemblies_are_registered(prepared, monkeypatch):
                               **kwargs)
     assert len(calls) == 1  # against 3 now; against 2 as before: from the memo
     calls.clear()
-    assembly._register_groups([], (group, poses, dict(members)), registered={(0, 1), (1, 2), (3, 0)}, memo={},
-                              **kwargs)
+    assembly._register_groups([], (group, poses, dict(members)), registered={(0, 1), (1, 2), (3, 0)},
+                              memo=assembly.GroupMemo(), **kwargs)
     assert len(calls) == 2
+    calls.clear()
+    # a new segmentation that relabelled fragment 2 (another surface) makes {0, 1} against 2
+    # a new registration; against 3, whose members kept their surfaces, the memo's
+    relabelled = [*kwargs["surfaces"]]
+    relabelled[2] = dataclasses.replace(relabelled[2], samples=relabelled[2].samples + 1e-3)
+    assembly._register_groups([], (group, poses, dict(members)), registered={(0, 1), (1, 2), (3, 0)}, memo=memo,
+                              **{**kwargs, "surfaces": relabelled})
+    assert len(calls) == 1
 
 
 def test_sub_assembly_registrations_do_not_depend_on_jobs(prepared):
@@ -430,7 +439,8 @@ def test_sub_assembly_registrations_do_not_depend_on_jobs(prepared):
         assembly._register_groups(proposals, (group, poses, members), surfaces=[f.surface for f in frags],
                                   meshes=[f.mesh for f in frags], size=prepared[1], tol=common["tol"], gap=0.0,
                                   params=common["params"], reg_params=common["reg_params"], seed=0,
-                                  common={**common, "cache": {}}, registered={(0, 2), (1, 3)}, jobs=jobs, memo={})
+                                  common={**common, "cache": {}}, registered={(0, 2), (1, 3)}, jobs=jobs,
+                                  memo=assembly.GroupMemo())
         found.append(proposals)
     assert len(found[0]) >= 2  # {0, 1} against 2 and against 3
     assert len(found[0]) == len(found[1])

@@ -214,5 +214,7 @@ def test_many_cells_are_cut_from_the_solid_cell_by_cell(tmp_path, mesh, pieces, 
     original = load_mesh(resolve_mesh_path(mesh))
     report = check_puzzle(puzzle, original.vertices, original.faces)
     assert report["volume_rel_error"] < 1e-5  # as for a few cells
-    assert report["max_gap_over_diag"] < (1e-5 if exact else 5e-3)
+    # exact cuts: the largest gap still depends on the CPU (manifold3d's arithmetic): 8.3e-5
+    # of the diagonal for the torus on an AMD EPYC, under 1e-5 on an Intel Xeon
+    assert report["max_gap_over_diag"] < (2e-4 if exact else 5e-3)
     assert report["fracture_area_on_original"] < 1e-4 and report["original_area_in_contact"] < 1e-4

@@ -37,9 +37,10 @@ if levels < 0:  # 100k vertices: quadric decimation of the 184k-vertex subdivisi
     V, F = np.asarray(om.vertices), np.asarray(om.triangles)
 diag = float(np.linalg.norm(np.ptp(V, axis=0)))
 radii = diag * 0.02 * 5 ** (np.arange(8) / 7)
-# one-time costs (imports, Open3D's first scene) on a tiny mesh, timed apart
+# one-time costs (imports, Open3D's first scene, loading the compiled D2 kernels: numba
+# compiles them once per installation) on a tiny mesh, timed apart
 t = time.perf_counter()
-integral_invariants(m.vertices, m.faces, [0.5 * diag], params=DescriptorParams(with_d2=False))
+integral_invariants(m.vertices, m.faces, [0.5 * diag], params=DescriptorParams(with_d2=d2))
 warmup = time.perf_counter() - t
 runs = []
 for _ in range(1 if d2 else 3):  # the median of three: single runs vary by 20 % here

@@ -18,6 +18,7 @@ is group 0, and its largest fragment is the world frame.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -226,7 +227,7 @@ def _merge_from_starts(proposals, state, *, starts: int, common: dict):
 def _total(state, *, surfaces, scenes, tol, reg_params, centres, radii, cache, gap, **_) -> float:
     """The sum of the verified scores of every two fragments in one sub-assembly."""
     group, poses, members = state
-    pairs = [(p, q) for g in members.values() for x, p in enumerate(sorted(g)) for q in sorted(g)[x + 1:]]
+    pairs = [pq for g in members.values() for pq in itertools.combinations(sorted(g), 2)]
     scores = _evaluate(pairs, poses, surfaces, scenes, tol=tol, reg_params=reg_params, centres=centres, radii=radii,
                        cache=cache, gap=gap)
     return float(sum(s for s, _, _ in scores.values()))
@@ -242,7 +243,7 @@ def _merge(proposals, state, *, surfaces, scenes, areas, tol, reach, params, reg
     """
     group, poses, members = state
     merges = []
-    if support is None or len(support) != len(proposals):
+    if support is None:
         support = _cycle_support(proposals, surfaces, reach=reach)
     # a proposal's verdict holds while its two sub-assemblies stay as they are: only those
     # touching the last merge's are weighed again (lazy greedy; the same merges, in order)

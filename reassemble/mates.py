@@ -17,6 +17,7 @@ import dataclasses
 import numpy as np
 
 from .geometry import face_adjacency, face_areas, face_normals, sample_surface
+from .parallel import pool_map, worker_state
 from .planes import PlanarPatch, in_plane_alignments, planar_patches
 from .segmentation import Segmentation, fracture_regions
 
@@ -31,7 +32,7 @@ class _Plane:
 def relabel_planar_mates(
     meshes: list[tuple[np.ndarray, np.ndarray]], segmentations: list[Segmentation], *,
     tol: float, min_area: float, min_overlap: float, samples: int = 20000, candidates: int = 16, max_planes: int = 64,
-    rng: np.random.Generator,
+    rng: np.random.Generator, jobs: int = 1, scheduler: str | None = None,
 ) -> tuple[list[Segmentation], list[int]]:
     """The segmentations with the planar mates of labelled planar break faces labelled fracture.
 
@@ -49,6 +50,9 @@ def relabel_planar_mates(
     max_planes : at most this many planes per fragment and label, largest first (a CAD
         part's unlabelled break face can be smaller than a dozen of its design faces)
     rng : numpy Generator
+    jobs, scheduler : the outlines are compared in that many local processes, or on the
+        Dask cluster at that address (:func:`parallel.pool_map`); the result does not
+        depend on either
 
     Returns
     -------
@@ -65,7 +69,9 @@ def relabel_planar_mates(
     and moments as the face, so only the ``candidates`` planes nearest in those (found in a
     k-d tree over the whole set) have their outlines compared: the work grows with the
     number of planes, not with its square, which matters with many similar faces
-    (Voronoi cells: every cell face is alike in size).
+    (Voronoi cells: every cell face is alike in size). Only the unlabelled candidates'
+    outlines decide whether a face has a mate to label, so the labelled candidates are
+    compared only when one of those qualifies, and only until one fits better.
     """
     planes: list[_Plane] = []
     sample_areas = []
@@ -82,16 +88,13 @@ def relabel_planar_mates(
                                     max_patches=max_planes, rng=rng):
                 planes.append(_Plane(k, labelled, p))
     best: dict[int, tuple[float, int]] = {}  # unlabelled plane -> (overlap, labelled plane)
-    for i, similar in _nearest_similar(planes, count=candidates):
-        a = planes[i]
-        mates = [(_outline_overlap(a.patch, planes[j].patch,
-                                   spacing=np.sqrt(max(sample_areas[a.fragment], sample_areas[planes[j].fragment]))), j)
-                 for j in similar]
-        if not mates:
-            continue
-        overlap, j = max(mates)
-        if not planes[j].labelled and overlap >= min_overlap and overlap > best.get(j, (0.0, -1))[0]:
-            best[j] = (overlap, i)
+    tasks = _nearest_similar(planes, count=candidates)
+    found = pool_map(_best_unlabelled_mate, tasks, jobs=jobs if len(tasks) >= _PARALLEL_FROM else 1,
+                     scheduler=scheduler if len(tasks) >= _PARALLEL_FROM else None,
+                     initializer=_start, initargs=(planes, sample_areas, min_overlap))
+    for (i, _), mate in zip(tasks, found):
+        if mate is not None and mate[0] > best.get(mate[1], (0.0, -1))[0]:
+            best[mate[1]] = (mate[0], i)
     out, changed = list(segmentations), []
     for j in sorted(best):
         k, patch = planes[j].fragment, planes[j].patch
@@ -107,6 +110,38 @@ def relabel_planar_mates(
         if k not in changed:
             changed.append(k)
     return out, sorted(changed)
+
+
+_PARALLEL_FROM = 64  # labelled planes: fewer are compared faster than worker processes start
+
+
+def _start(planes: list[_Plane], sample_areas: list[float], min_overlap: float) -> None:
+    worker_state.update(planes=planes, sample_areas=sample_areas, min_overlap=min_overlap)
+
+
+def _best_unlabelled_mate(task: tuple[int, list[int]]) -> tuple[float, int] | None:
+    """(overlap, plane) when the best mate of labelled plane ``i`` among ``similar`` is an
+    unlabelled plane overlapping it by ``min_overlap``, else None.
+
+    The same decision as the best of every candidate's overlap, with fewer outlines
+    compared: the unlabelled candidates first, and the labelled ones only when an
+    unlabelled one qualifies, until one of them fits better.
+    """
+    i, similar = task
+    planes, sample_areas = worker_state["planes"], worker_state["sample_areas"]
+    a = planes[i]
+
+    def overlap(j):
+        spacing = np.sqrt(max(sample_areas[a.fragment], sample_areas[planes[j].fragment]))
+        return _outline_overlap(a.patch, planes[j].patch, spacing=spacing), j
+
+    unlabelled = [overlap(j) for j in similar if not planes[j].labelled]
+    if not unlabelled or max(unlabelled)[0] < worker_state["min_overlap"]:
+        return None
+    mate = max(unlabelled)
+    if any(overlap(j) > mate for j in similar if planes[j].labelled):
+        return None
+    return mate
 
 
 def _nearest_similar(planes: list[_Plane], *, count: int, ratio: float = 1.5):

@@ -168,7 +168,8 @@ def _match(described: DescribedSet, config: Config, *, jobs: int, scheduler: str
     With ``config.retrieval.min_fragments`` set, a set of that many fragments or more
     registers only candidate pairs: each fragment's best partners by votes (:mod:`retrieval`)."""
     t0 = time.perf_counter()
-    frags, size = prepare_fragments({}, config=config, seed=config.seed, described=described)
+    frags, size = prepare_fragments({}, config=config, seed=config.seed, jobs=jobs, scheduler=scheduler,
+                                    described=described)
     if any(all(np.array_equal(a.segmentation.fracture, b.segmentation.fracture) for a, b in zip(frags, r.fragments)
                if a.segmentation is not None and b.segmentation is not None) for r in unless):
         return None

@@ -153,31 +153,35 @@ def prepare_fragments(
     config: Config = Config(),
     seed: int = 0,
     jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = False,
     described: DescribedSet | None = None,
 ) -> tuple[list[PreparedFragment], float]:
     """Descriptors at the face centres, segmentation over the whole set, fracture features.
 
-    ``jobs`` > 1 computes the descriptors of that many fragments at once, in processes.
+    ``jobs`` > 1 computes the descriptors of that many fragments at once, in processes (and
+    compares planar mates' outlines so), or ``scheduler`` on a Dask cluster.
     ``described``: the set's :func:`describe_fragments` with this ``config``, when already
     computed (``meshes`` is then ignored).
     Returns the prepared fragments (in sorted name order) and the reference size.
     """
     config.check()
     if described is None:
-        described = describe_fragments(meshes, config=config, jobs=jobs, progress=progress)
+        described = describe_fragments(meshes, config=config, jobs=jobs, scheduler=scheduler, progress=progress)
     good = [k for k, d in enumerate(described.descriptors) if d is not None]
     thickness = {k: wall_thickness(described.matched[k], described.meshes[k][1]) for k in good}
-    segs, shell = segment_set(described, thickness, config=config, seed=seed)
+    segs, shell = segment_set(described, thickness, config=config, seed=seed, jobs=jobs, scheduler=scheduler)
     return fracture_features(described, segs, thickness, shell=shell, config=config, seed=seed), described.size
 
 
-def segment_set(described: DescribedSet, thickness: dict[int, np.ndarray], *, config: Config, seed: int):
+def segment_set(described: DescribedSet, thickness: dict[int, np.ndarray], *, config: Config, seed: int,
+                jobs: int = 1, scheduler: str | None = None):
     """The segment step: (Segmentation or None per fragment, whether they are thin-walled sherds).
 
     Sherds (``config.thin_walls``, or None and most fragments are) are segmented along
     their break strips (:func:`shells.strip_segmentation`), solids all together
-    (:func:`segmentation.segment`); ``thickness``: wall thickness of each described fragment.
+    (:func:`segmentation.segment`); ``thickness``: wall thickness of each described fragment;
+    ``jobs``, ``scheduler``: where planar mates are compared (:func:`mates.relabel_planar_mates`).
     """
     matched, faces = described.matched, [f for _, f in described.meshes]
     good = sorted(thickness)
@@ -195,11 +199,12 @@ def segment_set(described: DescribedSet, thickness: dict[int, np.ndarray], *, co
                                       size=described.size, params=config.segment, seed=seed)):
             segs[k] = s
         if config.segment.mates and good:
-            segs = _with_mates(described, segs, good, config=config, seed=seed)
+            segs = _with_mates(described, segs, good, config=config, seed=seed, jobs=jobs, scheduler=scheduler)
     return segs, bool(shell)
 
 
-def _with_mates(described: DescribedSet, segs: list, good: list[int], *, config: Config, seed: int) -> list:
+def _with_mates(described: DescribedSet, segs: list, good: list[int], *, config: Config, seed: int, jobs: int = 1,
+                scheduler: str | None = None) -> list:
     """``segs`` with the planar mates of labelled planar break faces labelled fracture
     (:func:`mates.relabel_planar_mates`), at the contact tolerance the registration will use."""
     reg = with_noise(config.registration, noise=float(np.median([described.noise[k] for k in good])),
@@ -208,7 +213,7 @@ def _with_mates(described: DescribedSet, segs: list, good: list[int], *, config:
     relabelled, changed = relabel_planar_mates(
         [(described.matched[k], described.meshes[k][1]) for k in good], found, tol=reg.tolerance * described.size,
         min_area=reg.plane_area * float(np.median([s.fracture_area for s in found])),
-        min_overlap=config.segment.mate_overlap, rng=np.random.default_rng(seed))
+        min_overlap=config.segment.mate_overlap, rng=np.random.default_rng(seed), jobs=jobs, scheduler=scheduler)
     log.info("planar mates: %d fragment(s) relabelled", len(changed))
     out = list(segs)
     for k, s in zip(good, relabelled):

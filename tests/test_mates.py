@@ -99,3 +99,63 @@ def test_outlines_are_compared_only_with_the_nearest_similar_planes():
         key = lambda j: np.log([planes[j].patch.area, *planes[j].patch.spread])
         d = [np.sum((key(j) - key(i)) ** 2) for j in found[i]]
         assert d == sorted(d)
+
+
+def test_the_pruned_search_decides_as_the_best_of_every_candidate(monkeypatch):
+    """A labelled plane's unlabelled mate is taken exactly when it is the best of all its
+    candidates and overlaps by min_overlap; labelled candidates are compared only when an
+    unlabelled one qualifies."""
+    from reassemble import mates
+    from reassemble.planes import PlanarPatch
+
+    rng = np.random.default_rng(1)
+
+    def patch():
+        return PlanarPatch(np.zeros(3), np.array([0, 0, 1.0]), np.eye(3)[:2], np.ones(2), 1.0, np.zeros((3, 2)))
+
+    planes = [mates._Plane(k % 5, bool(rng.random() < 0.5), patch()) for k in range(40)]
+    index = {id(p.patch): j for j, p in enumerate(planes)}
+    table, seen = {}, []
+
+    def overlap(p, q, *, spacing):
+        seen.append(index[id(q.patch if hasattr(q, "patch") else q)])
+        return table[seen[-1]]
+
+    monkeypatch.setattr(mates, "_outline_overlap", overlap)
+    mates._start(planes, [1.0] * 5, 0.9)
+    labelled = [k for k, p in enumerate(planes) if p.labelled]
+    pruned = 0
+    try:
+        for _ in range(300):
+            table = {j: float(rng.choice([0.5, 0.85, 0.9, 0.95, rng.random()])) for j in range(len(planes))}
+            i = int(rng.choice(labelled))
+            others = [j for j in range(len(planes)) if planes[j].fragment != planes[i].fragment]
+            similar = [int(j) for j in rng.permutation(others)[:8]]
+            seen.clear()
+            got = mates._best_unlabelled_mate((i, similar))
+            overlap_, j = max((table[j], j) for j in similar)
+            assert got == ((overlap_, j) if not planes[j].labelled and overlap_ >= 0.9 else None)
+            assert sorted(seen) == sorted(set(seen)) and set(seen) <= set(similar)
+            if all(table[j] < 0.9 for j in similar if not planes[j].labelled):
+                assert all(not planes[j].labelled for j in seen)  # no labelled outline compared
+            pruned += len(seen) < len(similar)
+    finally:
+        mates.worker_state.clear()
+    assert pruned > 100
+
+
+def test_mates_compared_in_processes_are_those_compared_here(halves, monkeypatch):
+    """Two labelled faces (the cut half and a moved copy of it) compared in two worker
+    processes: the same labels as in this process."""
+    from reassemble import mates
+
+    (va, fa, cut_a), (vb, fb, cut_b) = halves
+    meshes = [(va, fa), (vb, fb), (va + 5.0, fa)]
+    segs = [_segmentation(va, fa, cut_a), _segmentation(vb, fb, np.zeros(len(fb), bool)),
+            _segmentation(va + 5.0, fa, cut_a)]
+    kw = dict(tol=0.005, min_area=0.1, min_overlap=0.9)
+    here, changed = relabel_planar_mates(meshes, segs, rng=np.random.default_rng(0), **kw)
+    monkeypatch.setattr(mates, "_PARALLEL_FROM", 2)
+    there, changed2 = relabel_planar_mates(meshes, segs, rng=np.random.default_rng(0), jobs=2, **kw)
+    assert changed == changed2 == [1]
+    assert all(np.array_equal(a.fracture, b.fracture) for a, b in zip(here, there))

@@ -80,7 +80,8 @@ class SegmentParams:
         best mates of labelled planar break faces (:mod:`mates`): True always, False never,
         None (default) only when a run's assembly leaves fragments unplaced, before
         ``fallback`` (a prismatic part's end face matches its cross-section as well as the
-        true mate does)
+        true mate does); a set registering candidate pairs only (``retrieval``) starts
+        with them and tries without
     mate_overlap : the share of either outline on the other, laid together, that makes a
         plane a mate (a clean break's two faces coincide)
 

@@ -92,3 +92,20 @@ def test_candidate_pairs_and_asking_for_more_place_every_fragment(puzzle):
         true_rel = invert_transform(truth[0]) @ truth[k]
         assert rotation_angle_deg(rel[:3, :3], true_rel[:3, :3]) < 2.0
         assert np.linalg.norm(rel[:3, 3] - true_rel[:3, 3]) < 0.01 * result.size
+
+
+def test_a_candidate_set_starts_with_planar_mates_and_tries_without():
+    from reassemble.pipeline import _segmentations
+
+    config = with_setting(Config(), "retrieval.min_fragments=16")
+    first, retries = _segmentations(config, 15)  # every pair registered: mates only on a retry
+    assert first is config and [r.segment.mates for r in retries][0] is True
+    first, retries = _segmentations(config, 16)  # candidate pairs only: mates first
+    assert first.segment.mates is True and retries[0].segment.mates is False
+    assert [r.segment.method for r in retries] == [config.segment.method, config.segment.fallback]
+    assert first.retrieval == config.retrieval and first.segment.method == config.segment.method
+    for mates in ("true", "false"):  # a set choice: no retry on mates, whatever the size
+        fixed = with_setting(config, f"segment.mates={mates}")
+        for n in (4, 40):
+            first, retries = _segmentations(fixed, n)
+            assert first is fixed and [r.segment.method for r in retries] == [config.segment.fallback]

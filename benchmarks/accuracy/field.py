@@ -253,6 +253,10 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--timeout", type=float, default=0, help="seconds per puzzle, then it counts as failed "
                         "(default 0: none)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed-shift", type=int, default=0, metavar="S",
+                        help="break every selected puzzle again with its seed + S: new cuts of the same meshes, "
+                             "styles and piece counts (more puzzles to study a half on; they are built beside "
+                             "the set's own)")
     add_setting_option(parser)
     parser.add_argument("--results", type=Path, default=None, metavar="DIR",
                         help="keep reassemble bench's results here, DIR/<half>/results.jsonl (a rerun with the "
@@ -275,6 +279,7 @@ def selected(args, halves: list[str]) -> tuple[list[tuple], list[dict]]:
     for half in halves:
         root = args.sets / HALVES[half]
         for spec in SETS[HALVES[half]]():
+            spec = dataclasses.replace(spec, seed=spec.seed + args.seed_shift)
             kind = FIELD_MESHES[spec.mesh].kind
             if (spec.pieces > args.max_pieces or (args.clean_only and spec.noise) or (args.noisy_only and not spec.noise)
                     or (args.styles and style_label(spec) not in args.styles.split(","))

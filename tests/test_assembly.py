@@ -481,3 +481,47 @@ def test_a_wrong_first_merge_is_undone_by_another_start(prepared, puzzle):
     assert placed_right(starts)
     assert all(np.allclose(invert_transform(starts[1][j]) @ starts[1][i], invert_transform(T[j]) @ T[i], atol=1e-6)
                for i in range(n) for j in range(n))
+
+
+def test_a_refinement_that_verifies_worse_is_not_kept(prepared, monkeypatch):
+    # the joint refinement is kept only when the sub-assembly verifies at least as well:
+    # one that turns a fragment off its verified pose (as sliding on a smooth break does)
+    # is dropped, one that changes nothing is kept
+    from reassemble import assembly
+    from reassemble.config import Config
+    from reassemble.geometry import make_scene
+    from reassemble.pairs import registration_params
+
+    frags, size = prepared
+    _, results, _, _ = _merge_inputs(prepared)
+    reg = registration_params(frags, size=size)
+    surfaces, meshes = [f.surface for f in frags], [f.mesh for f in frags]
+    calls = []
+
+    def run(turn):
+        def fake(T, surf, **kw):
+            out = np.array(T, copy=True)
+            k = (kw["anchor"] + 1) % len(out)
+            c = surf[k].surface.mean(axis=0)
+            R = _axis_angle(np.array([0.0, 0.0, 1.0]), np.radians(turn))
+            out[k] = out[k] @ make_transform(R, c - R @ c)
+            order = [next(k for k, x in enumerate(surfaces) if x is s) for s in surf]
+            calls.append((order, np.array(T, copy=True), out))
+            return out
+
+        monkeypatch.setattr(assembly, "refine", fake)
+        return assembly.assemble(surfaces, meshes, results, size=size, params=Config().assembly, reg_params=reg)
+
+    unchanged, turned = run(0.0), run(4.0)
+    assert len(calls) == 2 and unchanged.placed.all() and turned.placed.all()
+    # the turn verifies worse (the test can fail): the sum of every pair's score drops
+    n = len(frags)
+    order, before, after = calls[1]
+    total = lambda T: assembly._total((np.zeros(n, int), T, {0: list(range(n))}), surfaces=[surfaces[k] for k in order],
+                                      scenes=[make_scene(*meshes[k]) for k in order], tol=reg.tolerance * size,
+                                      reg_params=reg, centres=assembly._spheres([surfaces[k] for k in order])[0],
+                                      radii=assembly._spheres([surfaces[k] for k in order])[1], cache={}, gap=0.0)
+    assert sorted(order) == list(range(n))
+    assert total(after) < total(before) - 0.05
+    assert np.allclose(turned.T_group_fragment, unchanged.T_group_fragment, atol=1e-9)
+    assert [(c.a, c.b) for c in turned.contacts] == [(c.a, c.b) for c in unchanged.contacts]

@@ -320,13 +320,23 @@ def group_surface(
     """
     m = len(surfaces)
     moved = [transform_points(T_group_fragment[k], s.samples) for k, s in enumerate(surfaces)]
+    keys_moved = [transform_points(T_group_fragment[k], s.keypoints) for k, s in enumerate(surfaces)]
+    # bounding balls of each member's samples and keypoints: only members whose balls come
+    # within the reach can hold a point near another's (the same answer, a few trees a
+    # member instead of one of the whole group)
+    reach = 2 * tol + gap
+    balls = []
+    for pts in (np.vstack([x, y]) if len(y) else x for x, y in zip(moved, keys_moved)):
+        centre = pts.mean(axis=0) if len(pts) else np.zeros(3)
+        balls.append((centre, float(np.linalg.norm(pts - centre, axis=1).max()) if len(pts) else 0.0))
     free_samples, free_keys = [], []
     for k, s in enumerate(surfaces):
-        others = [moved[o] for o in range(m) if o != k and len(moved[o])]
+        others = [moved[o] for o in range(m) if o != k and len(moved[o])
+                  and np.linalg.norm(balls[k][0] - balls[o][0]) <= balls[k][1] + balls[o][1] + reach]
         if others and len(moved[k]):
             tree = cKDTree(np.vstack(others))
             free_samples.append(~np.isfinite(tree.query(moved[k], distance_upper_bound=2 * tol + gap)[0]))
-            keys = transform_points(T_group_fragment[k], s.keypoints)
+            keys = keys_moved[k]
             free_keys.append(~np.isfinite(tree.query(keys, distance_upper_bound=2 * tol + gap)[0]) if len(keys)
                              else np.zeros(0, bool))
         else:

@@ -184,12 +184,10 @@ def _cycle_support(proposals, surfaces, *, reach: float, points: int = 32) -> np
     return support
 
 
-def _merge_from_starts(proposals, state, *, starts: int, common: dict, verify: dict | None = None):
+def _merge_from_starts(proposals, state, *, starts: int, common: dict):
     """Greedy merging (:func:`_merge`) from up to ``starts`` first merges, in place on
     ``state``: the outcome whose sub-assemblies have the largest verified total (the sum of
     the scores of every two fragments placed together, :func:`_total`); returns its merges.
-    ``verify``: ``surfaces`` and ``cache`` the totals are verified with instead of
-    ``common``'s (all samples: the measure the pairs' candidates were ranked by).
 
     Notes
     -----
@@ -201,9 +199,7 @@ def _merge_from_starts(proposals, state, *, starts: int, common: dict, verify: d
     the break; a wrong start loses at least the contacts it prevents. The starts are the
     best first merges in greedy order (the first is plain greedy, kept on a tie). Huang et
     al. 2006 (Sec. 6) search the space of consistent merges the same way, by verified
-    contact over the loops. The totals are verified on all samples: on thinned ones two
-    placements of one pair that score alike (a two-disc break face of a ring and its
-    half-turn: 0.644 and 0.632) could swap, with no loop to tell them apart.
+    contact over the loops.
     """
     group, poses, members = state
     support = _cycle_support(proposals, common["surfaces"], reach=common["reach"])
@@ -218,7 +214,7 @@ def _merge_from_starts(proposals, state, *, starts: int, common: dict, verify: d
         i, j, T_j_i, score = proposals[x]
         _join(trial, i, j, T_j_i)
         merges = [(i, j, float(score))] + _merge(proposals, trial, support=support, **common)
-        total = _total(trial, **{**common, **(verify or {})})
+        total = _total(trial, **common)
         if best is None or total > best[0] + 1e-9:
             best = (total, trial, merges)
     _, (g, p, m), merges = best
@@ -445,13 +441,12 @@ def assemble(
     quick = [_thinned(s, params.verify_samples) for s in surfaces]
     common = dict(surfaces=quick, scenes=scenes, areas=areas, tol=tol, reach=reg_params.ransac_tolerance * size,
                   params=params, reg_params=reg_params, centres=centres, radii=radii, cache=cache, gap=gap)
-    final: dict = {}  # the verification cache of all samples (totals, refinement, final contacts)
-    merges = _merge_from_starts(proposals, state, starts=params.starts, common=common,
-                                verify=dict(surfaces=surfaces, cache=final))
+    merges = _merge_from_starts(proposals, state, starts=params.starts, common=common)
     merges += _register_groups(proposals, state, surfaces=surfaces, meshes=meshes, size=size, tol=tol, gap=gap,
                                params=params, reg_params=reg_params, seed=seed, common=common,
                                registered=set(pair_results), jobs=jobs, scheduler=scheduler,
                                memo=GroupMemo() if memo is None else memo)
+    final: dict = {}  # the verification cache of the final poses (all samples)
     for g in members.values():
         if len(g) > 1:
             refined = poses.copy()

@@ -446,22 +446,12 @@ def assemble(
                                params=params, reg_params=reg_params, seed=seed, common=common,
                                registered=set(pair_results), jobs=jobs, scheduler=scheduler,
                                memo=GroupMemo() if memo is None else memo)
-    final: dict = {}  # the verification cache of the final poses (all samples)
     for g in members.values():
         if len(g) > 1:
-            refined = poses.copy()
-            refined[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
-                                iterations=params.refine_iterations, anchor=int(np.argmax(areas[g])),
-                                levels=params.refine_levels, n_points=params.refine_samples, gap=gap,
-                                rim_reach=params.rim_reach, rim_weight=params.rim_weight)
-            # kept only when it verifies at least as well: on smooth breaks the joint
-            # refinement can slide fragments together along their contacts, away from
-            # poses their pairs verified
-            common_final = dict(surfaces=surfaces, scenes=scenes, tol=tol, reg_params=reg_params, centres=centres,
-                                radii=radii, cache=final, gap=gap)
-            group_state = (group, refined, {0: g})
-            if _total(group_state, **common_final) >= _total((group, poses, {0: g}), **common_final) - 1e-9:
-                poses[g] = refined[g]
+            poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
+                              iterations=params.refine_iterations, anchor=int(np.argmax(areas[g])),
+                              levels=params.refine_levels, n_points=params.refine_samples, gap=gap,
+                              rim_reach=params.rim_reach, rim_weight=params.rim_weight)
 
     # contacts at the final poses, and the groups renumbered by area
     contacts = []
@@ -469,7 +459,7 @@ def assemble(
     for g in members.values():
         pairs = sorted((min(p, q), max(p, q)) for x, p in enumerate(g) for q in g[x + 1:])
         for (p, q), (s, c, pen) in sorted(_evaluate(pairs, poses, surfaces, scenes, tol=tol, reg_params=reg_params,
-                                                    centres=centres, radii=radii, cache=final, gap=gap).items()):
+                                                    centres=centres, radii=radii, cache={}, gap=gap).items()):
             if c > 0:
                 contacts.append(Contact(p, q, float(s), float(c), float(pen)))
                 touching[p] += c

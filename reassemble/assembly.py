@@ -114,6 +114,14 @@ def _spheres(surfaces: list[FractureSurface]) -> tuple[np.ndarray, np.ndarray]:
     return centres, radii
 
 
+def _ball(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """(centre (3,), radius) of a ball holding every one of ``points`` (k, 3)."""
+    if not len(points):
+        return np.zeros(3), 0.0
+    centre = points.mean(axis=0)
+    return centre, float(np.linalg.norm(points - centre, axis=1).max())
+
+
 def _near(T_p: np.ndarray, T_q: np.ndarray, p: int, q: int, centres, radii, margin: float) -> bool:
     """Whether fragments p and q, posed in a common frame, may touch."""
     cp = T_p[:3, :3] @ centres[p] + T_p[:3, 3]
@@ -321,19 +329,16 @@ def group_surface(
     # within the reach can hold a point near another's (the same answer, a few trees a
     # member instead of one of the whole group)
     reach = 2 * tol + gap
-    balls = []
-    for pts in (np.vstack([x, y]) if len(y) else x for x, y in zip(moved, keys_moved)):
-        centre = pts.mean(axis=0) if len(pts) else np.zeros(3)
-        balls.append((centre, float(np.linalg.norm(pts - centre, axis=1).max()) if len(pts) else 0.0))
+    balls = [_ball(np.vstack([x, y])) for x, y in zip(moved, keys_moved)]
     free_samples, free_keys = [], []
     for k, s in enumerate(surfaces):
         others = [moved[o] for o in range(m) if o != k and len(moved[o])
                   and np.linalg.norm(balls[k][0] - balls[o][0]) <= balls[k][1] + balls[o][1] + reach]
         if others and len(moved[k]):
             tree = cKDTree(np.vstack(others))
-            free_samples.append(~np.isfinite(tree.query(moved[k], distance_upper_bound=2 * tol + gap)[0]))
+            free_samples.append(~np.isfinite(tree.query(moved[k], distance_upper_bound=reach)[0]))
             keys = keys_moved[k]
-            free_keys.append(~np.isfinite(tree.query(keys, distance_upper_bound=2 * tol + gap)[0]) if len(keys)
+            free_keys.append(~np.isfinite(tree.query(keys, distance_upper_bound=reach)[0]) if len(keys)
                              else np.zeros(0, bool))
         else:
             free_samples.append(np.ones(len(s.samples), bool))

@@ -89,8 +89,8 @@ def relabel_planar_mates(
                 planes.append(_Plane(k, labelled, p))
     best: dict[int, tuple[float, int]] = {}  # unlabelled plane -> (overlap, labelled plane)
     tasks = _nearest_similar(planes, count=candidates)
-    found = pool_map(_best_unlabelled_mate, tasks, jobs=jobs if len(tasks) >= _PARALLEL_FROM else 1,
-                     scheduler=scheduler if len(tasks) >= _PARALLEL_FROM else None,
+    here = len(tasks) < _PARALLEL_FROM
+    found = pool_map(_best_unlabelled_mate, tasks, jobs=1 if here else jobs, scheduler=None if here else scheduler,
                      initializer=_start, initargs=(planes, sample_areas, min_overlap))
     for (i, _), mate in zip(tasks, found):
         if mate is not None and mate[0] > best.get(mate[1], (0.0, -1))[0]:

@@ -151,8 +151,7 @@ def _segmentations(config: Config, n: int) -> tuple[Config, list[Config]]:
     break face without a planar mate is left as it was.
     """
     seg = config.segment
-    out = []
-    first = config
+    first, out = config, []
     if seg.mates is None:
         with_mates = dataclasses.replace(config, segment=dataclasses.replace(seg, mates=True))
         if _candidates_only(config, n):
@@ -160,9 +159,8 @@ def _segmentations(config: Config, n: int) -> tuple[Config, list[Config]]:
             out.append(dataclasses.replace(config, segment=dataclasses.replace(seg, mates=False)))
         else:
             out.append(with_mates)
-    if config.segment.fallback not in (None, config.segment.method):
-        out.append(dataclasses.replace(config, segment=dataclasses.replace(config.segment,
-                                                                            method=config.segment.fallback)))
+    if seg.fallback not in (None, seg.method):
+        out.append(dataclasses.replace(config, segment=dataclasses.replace(seg, method=seg.fallback)))
     return first, out
 
 

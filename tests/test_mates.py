@@ -118,7 +118,7 @@ def test_the_pruned_search_decides_as_the_best_of_every_candidate(monkeypatch):
     table, seen = {}, []
 
     def overlap(p, q, *, spacing):
-        seen.append(index[id(q.patch if hasattr(q, "patch") else q)])
+        seen.append(index[id(q)])
         return table[seen[-1]]
 
     monkeypatch.setattr(mates, "_outline_overlap", overlap)

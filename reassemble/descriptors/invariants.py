@@ -39,17 +39,7 @@ import numpy as np
 from ..errors import ReassembleError
 from ..geometry import make_scene
 from ..repair import is_closed_solid
-from .kernels import (
-    ball_moment_spectra,
-    ball_spectra,
-    ball_spectrum,
-    bspline_eval,
-    bspline_gradient,
-    bspline_prefilter,
-    radial_on_grid,
-    sphere_spectrum,
-    spline_integration,
-)
+from .compiled import BALL, BALL_MOMENT2, SPHERE, moment_products, radial_products, spline_at
 from .tiles import DISTANCE_PAD, check_fits, plan_tiles, tile_offset
 from .voxelize import (
     Grid,
@@ -228,31 +218,25 @@ def _put(out: dict, key: str, rows, cols: np.ndarray, value: np.ndarray, shape: 
         out[key][rows[:, None], cols] = value
 
 
-def _spectral_factor(grid: Grid) -> np.ndarray:
-    """The prefilter times the spline integration factor on the grid's half-spectrum (float32)."""
-    return (bspline_prefilter(grid.shape) * spline_integration(grid.shape, grid.h)).astype(np.float32)
-
-
-def _coefficients(spectrum: np.ndarray, kernels: list[np.ndarray], grid: Grid, *, pre=None) -> list[np.ndarray]:
-    """B-spline coefficient grids of the spline through the grid samples integrated against each kernel.
-
-    One spectral factor does both: spline integration of the samples, and the prefilter
-    that turns the result into B-spline coefficients for reading it between nodes
-    (``pre``: :func:`_spectral_factor`, if already computed).
-    """
+def _coefficient_grids(products: np.ndarray, grid: Grid) -> list[np.ndarray]:
+    """B-spline coefficient grids of the convolved grid: each spectrum-times-kernel product
+    (:mod:`.compiled`, the spline's spectral factor applied) transformed back."""
     from scipy.fft import irfftn
 
-    pre = _spectral_factor(grid) if pre is None else pre
-    coeffs = []
-    for kernel in kernels:
-        kernel *= pre  # in place: the kernels are built for this call only
-        coeffs.append(irfftn(spectrum * kernel, s=grid.shape, workers=-1))
-    return coeffs
+    return [irfftn(product, s=grid.shape, workers=-1) for product in products]
 
 
-def _convolve_at(spectrum: np.ndarray, kernels: list[np.ndarray], grid: Grid, points: np.ndarray) -> np.ndarray:
-    """Integrate the cubic spline through the grid samples against each kernel; read at points (n, k)."""
-    return bspline_eval(_coefficients(spectrum, kernels, grid), (points - grid.origin) / grid.h)
+def _radial_coefficients(spectrum: np.ndarray, grid: Grid, r: float, kinds) -> list[np.ndarray]:
+    """The coefficient grids of the radial kernels ``kinds`` (:func:`.compiled.radial_products`) of radius r."""
+    return _coefficient_grids(radial_products(spectrum, grid.shape, grid.h, r, kinds), grid)
+
+
+def _read(coeffs: list[np.ndarray], u: np.ndarray) -> np.ndarray:
+    """Each coefficient grid's spline at the fractional voxel indices u (n, 3): (n, len(coeffs))."""
+    out = np.empty((len(u), len(coeffs)))
+    for j, c in enumerate(coeffs):
+        out[:, j] = spline_at(c, u)
+    return out
 
 
 def _check_radii(radii: np.ndarray, diag: float, params: DescriptorParams) -> None:
@@ -298,27 +282,30 @@ def _level_integrals(
     cubic spline of V's convolved grid: no more FFTs, and exact for cubics where V is, to
     leading order, a cubic in the offset from the surface. SA_r = dV_r/dr is the
     occupancy integrated against the sphere p + rS, the derivative in r of the ball (Eq. 17).
+    The first moments m = ∫ (x - p) over ball ∩ solid need no FFT either: differentiating
+    V and P under the integral gives grad V = ∫ over the sphere of the occupancy times the
+    outward normal, grad P = r^2 grad V - 2 m, so m = (r^2 grad V - grad P) / 2.
     """
     n, k = len(points), len(radii)
     u = (points - grid.origin) / grid.h
-    kernels = []
-    for r in radii:
-        kernels += list(radial_on_grid(ball_spectra, grid.shape, grid.h, r))
-    pre = _spectral_factor(grid)
-    coeffs = _coefficients(spectrum, kernels, grid, pre=pre)
-    values = bspline_eval(coeffs, u)
-    area = np.stack([bspline_gradient(coeffs[2 * j], u) / grid.h for j in range(k)], axis=1)
-    del coeffs
-    out = {"V": values[:, 0::2], "P": values[:, 1::2], "SA": np.full((n, k), np.nan), "area": area}
-    for j, r in enumerate(radii if params.sphere_area else []):  # one grid at a time: no more memory
-        sphere = radial_on_grid(lambda k, r: (sphere_spectrum(k, r),), grid.shape, grid.h, r)
-        out["SA"][:, j] = bspline_eval(_coefficients(spectrum, list(sphere), grid, pre=pre), u)[:, 0]
+    out = {key: np.full((n, k), np.nan) for key in ("V", "P", "SA")}
+    out["area"] = np.empty((n, k, 3))
+    kinds = [BALL, BALL_MOMENT2] + ([SPHERE] if params.sphere_area else [])
     if params.principal:
         out["K2_cov"], out["dir1"], out["normal"] = np.empty((n, k)), np.empty((n, k, 3)), np.empty((n, k, 3))
-        for j, r in enumerate(radii):
-            mom = _convolve_at(spectrum, ball_moment_spectra(grid.shape, grid.h, r), grid, points)
+    for j, r in enumerate(radii):  # one radius's grids at a time
+        coeffs = _radial_coefficients(spectrum, grid, r, kinds)
+        out["V"][:, j], area = spline_at(coeffs[0], u, gradient=True)
+        out["area"][:, j] = area / grid.h
+        out["P"][:, j], grad_p = spline_at(coeffs[1], u, gradient=True)
+        if params.sphere_area:
+            out["SA"][:, j] = spline_at(coeffs[2], u)
+        del coeffs
+        if params.principal:
+            first = 0.5 * (r * r * out["area"][:, j] - grad_p / grid.h)
+            second = _read(_coefficient_grids(moment_products(spectrum, grid.shape, grid.h, r), grid), u)
             out["K2_cov"][:, j], out["dir1"][:, j], out["normal"][:, j] = principal_from_moments(
-                out["V"][:, j], mom[:, :3], mom[:, 3:], r
+                out["V"][:, j], first, second, r
             )
     # The ramp averages the solid over offsets of variance s2: V gains s2/2 * V'' and P
     # s2/2 * P'', with V'' = pi r^2 H and P'' = pi r^4 H / 2 to leading order; SA = dV/dr
@@ -511,8 +498,8 @@ def _distance_tile(
     spectrum = rfftn(sq, workers=-1)
     del sq
     far = float(saturated_square(np.array(band), exact, band))
-    ball, sphere = radial_on_grid(lambda k, r: (ball_spectrum(k, r), sphere_spectrum(k, r)), grid.shape, grid.h, r)
-    values = _convolve_at(spectrum, [ball, sphere], grid, points)
+    u = (points - grid.origin) / grid.h
+    values = _read(_radial_coefficients(spectrum, grid, r, [BALL, SPHERE]), u)
     out["D2"] = values[:, 0] + far * 4.0 * np.pi * r**3 / 3.0
     out["SD2"] = values[:, 1] + far * 4.0 * np.pi * r**2
     _add_time(timings, "d2_fft", t)
@@ -524,9 +511,8 @@ def _distance_tile(
                                    ray_start=ray_start, frame=frame) > 0.5
     spectrum = rfftn(signed_distance(near, inside, r=exact, band=band), workers=-1)
     del inside, near
-    (ball,) = radial_on_grid(lambda k, r: (ball_spectrum(k, r),), grid.shape, grid.h, r)
     c = float(saturated_signed(np.array(band), exact, band))
-    out["D"] = _convolve_at(spectrum, [ball], grid, points)[:, 0] + c * 4.0 * np.pi * r**3 / 3.0
+    out["D"] = _read(_radial_coefficients(spectrum, grid, r, [BALL]), u)[:, 0] + c * 4.0 * np.pi * r**3 / 3.0
     _add_time(timings, "d_fft", t)
     return out
 

@@ -84,9 +84,12 @@ def edge_counts(faces: np.ndarray) -> tuple[int, int, int, bool]:
     """(boundary edges, edges of an odd number > 1 of faces, edges of more than two faces,
     balanced): balanced when every edge is crossed as often in one direction as in the
     other, as on the surface of a solid (pinched edges of four faces included)."""
-    directed = np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    key, sign = np.sort(directed, axis=1), np.where(directed[:, 0] < directed[:, 1], 1, -1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    directed = np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    lo, hi = directed.min(axis=1), directed.max(axis=1)
+    sign = np.where(directed[:, 0] < directed[:, 1], 1, -1)
+    # one int64 per undirected edge: a 1-D unique is ~10x faster than unique rows (axis=0)
+    key = lo * (int(directed.max(initial=0)) + 1) + hi
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
     balance = np.bincount(inverse.ravel(), sign, len(counts))
     return (int(np.sum(counts == 1)), int(np.sum((counts > 1) & (counts % 2 == 1))), int(np.sum(counts > 2)),
             bool(np.all(balance == 0)))

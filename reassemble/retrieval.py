@@ -32,9 +32,11 @@ class RetrievalParams:
     Parameters
     ----------
     min_fragments : sets with at least this many fragments register candidate pairs only;
-        None (the default): every set registers every pair. Opt-in while measured on
-        Voronoi cells only (20 cells of two meshes: the same strict accuracy as every pair,
-        in 0.6 of the time; ``benchmarks/speed/scale.py``)
+        None: every set registers every pair. From 30 fragments every pair would take
+        7 minutes and more on 2 cores (435 pairs, growing as n^2), where candidate pairs
+        solved every large set measured: 20 Voronoi cells of spot, bunny and a torus
+        (fractal cuts), 50 of spot (``python -m benchmarks.speed.scale``); the field
+        benchmarks' sets (2-20 pieces) register every pair
     partners : each fragment's best partners by votes registered first (a pair is
         registered when either fragment has the other among them)
     more : further partners per round for a fragment the assembly leaves unplaced
@@ -48,7 +50,7 @@ class RetrievalParams:
         with most of its break open is missing neighbours, or sits where it does not belong
     """
 
-    min_fragments: int | None = None
+    min_fragments: int | None = 30
     partners: int = 4
     more: int = 4
     max_partners: int = 8

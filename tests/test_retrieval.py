@@ -109,3 +109,10 @@ def test_a_candidate_set_starts_with_planar_mates_and_tries_without():
         for n in (4, 40):
             first, retries = _segmentations(fixed, n)
             assert first is fixed and [r.segment.method for r in retries] == [config.segment.fallback]
+
+
+def test_large_sets_register_candidate_pairs_by_default():
+    from reassemble.pipeline import _candidates_only
+
+    assert not _candidates_only(Config(), 29) and _candidates_only(Config(), 30)
+    assert not _candidates_only(with_setting(Config(), "retrieval.min_fragments=none"), 1000)

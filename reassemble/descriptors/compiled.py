@@ -97,7 +97,7 @@ def radial_products(spectrum: np.ndarray, shape: tuple[int, int, int], h: float,
     Returns
     -------
     (len(kinds), nx, ny, nz // 2 + 1) complex64: each ``irfftn``'d (``s=shape``) gives the
-    B-spline coefficients of the convolved grid, as :func:`.invariants._coefficients`
+    B-spline coefficients of the convolved grid (:func:`.invariants._coefficient_grids`)
     """
     kinds = np.asarray(kinds, np.int64)
     (wx2, fx), (wy2, fy) = (_axis_factor(n, h, False) for n in shape[:2])
@@ -230,7 +230,7 @@ def _moment_products(spectrum, wx, wy, wz, fx, fy, fz, r, scale, at_zero, out):
 def moment_products(spectrum: np.ndarray, shape: tuple[int, int, int], h: float, r: float) -> np.ndarray:
     """The spectrum times the ball's second-moment kernels (xx, yy, zz, xy, xz, yz) of radius r,
     the spline's spectral factor applied (as :func:`.kernels.ball_moment_spectra`, the first
-    moments left out: :func:`first_moments` has them from V's and P's gradients).
+    moments left out: :func:`.invariants._level_integrals` has them from V's and P's gradients).
 
     Returns
     -------

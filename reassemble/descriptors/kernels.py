@@ -1,5 +1,8 @@
 """Fourier transforms of the ball kernels, and the spectral tools of the FFT convolution.
 
+The descriptors run the compiled loops of :mod:`.compiled`; the array versions here are
+their reference (``tests/test_compiled.py``) and the closed forms they are checked against.
+
 For a radial kernel ``g(|y|) 1(|y| < r)`` the 3D Fourier transform depends on
 ``k = |omega|`` only: ``4 pi / k * integral_0^r rho g(rho) sin(k rho) d rho``.
 With ``x = k r``:

@@ -330,10 +330,13 @@ def group_surface(
     # member instead of one of the whole group)
     reach = 2 * tol + gap
     balls = [_ball(np.vstack([x, y])) for x, y in zip(moved, keys_moved)]
+    centres, radii = np.array([c for c, _ in balls]).reshape(m, 3), np.array([r for _, r in balls])
+    has_samples = np.array([len(x) > 0 for x in moved])
     free_samples, free_keys = [], []
     for k, s in enumerate(surfaces):
-        others = [moved[o] for o in range(m) if o != k and len(moved[o])
-                  and np.linalg.norm(balls[k][0] - balls[o][0]) <= balls[k][1] + balls[o][1] + reach]
+        near = (np.linalg.norm(centres - centres[k], axis=1) <= radii[k] + radii + reach) & has_samples
+        near[k] = False
+        others = [moved[o] for o in np.flatnonzero(near)]
         if others and len(moved[k]):
             tree = cKDTree(np.vstack(others))
             free_samples.append(~np.isfinite(tree.query(moved[k], distance_upper_bound=reach)[0]))

@@ -16,6 +16,8 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from .kernels import prefilter_axis
+
 # TBB, numba's first choice, warns when the system's is too old; OpenMP ships with numba
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
@@ -75,13 +77,15 @@ def _products(spectrum, wx2, wy2, wz2, fx, fy, fz, kinds, scales, r, out):
     return out
 
 
-def _axis_factor(n: int, h: float, real: bool) -> tuple[np.ndarray, np.ndarray]:
-    """One axis's squared angular frequency and its factor of the cubic spline's prefilter
-    times spline integration (:func:`.kernels.bspline_prefilter`, :func:`.kernels.spline_integration`)."""
-    f = np.fft.rfftfreq(n) if real else np.fft.fftfreq(n)
-    w = 2.0 * np.pi * f / h
-    factor = (3.0 / (2.0 + np.cos(2.0 * np.pi * f))) * np.sinc(f) ** 4 * 3.0 / (2.0 + np.cos(2.0 * np.pi * f))
-    return w * w, factor
+def _axes(shape: tuple[int, int, int], h: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per axis of the half-spectrum: the angular frequency, and the factor of the spline's
+    prefilter times spline integration (:func:`.kernels.prefilter_axis` times :func:`.kernels.integration_axis`)."""
+    freqs = [np.fft.fftfreq(shape[0]), np.fft.fftfreq(shape[1]), np.fft.rfftfreq(shape[2])]
+    # integration_axis's expression, multiplied in this order: the descriptors stay the
+    # same to the last bit as when this module computed the factors itself
+    factors = [prefilter_axis(n, r) * np.sinc(f) ** 4 * 3.0 / (2.0 + np.cos(2.0 * np.pi * f))
+               for n, r, f in zip(shape, (False, False, True), freqs)]
+    return [2.0 * np.pi * f / h for f in freqs], factors
 
 
 def radial_products(spectrum: np.ndarray, shape: tuple[int, int, int], h: float, r: float, kinds) -> np.ndarray:
@@ -100,12 +104,11 @@ def radial_products(spectrum: np.ndarray, shape: tuple[int, int, int], h: float,
     B-spline coefficients of the convolved grid (:func:`.invariants._coefficient_grids`)
     """
     kinds = np.asarray(kinds, np.int64)
-    (wx2, fx), (wy2, fy) = (_axis_factor(n, h, False) for n in shape[:2])
-    wz2, fz = _axis_factor(shape[2], h, True)
+    w, f = _axes(shape, h)
     exponent = np.where(kinds == BALL, 3, np.where(kinds == BALL_MOMENT2, 5, 2))
     scales = 4.0 * np.pi * float(r) ** exponent.astype(float)
     out = np.empty((len(kinds),) + spectrum.shape, np.complex64)
-    return _products(spectrum, wx2, wy2, wz2, fx, fy, fz, kinds, scales, float(r), out)
+    return _products(spectrum, *(x * x for x in w), *f, kinds, scales, float(r), out)
 
 
 @njit(cache=True)
@@ -236,11 +239,7 @@ def moment_products(spectrum: np.ndarray, shape: tuple[int, int, int], h: float,
     -------
     (6, nx, ny, nz // 2 + 1) complex64, each ``irfftn``'d to a coefficient grid
     """
-    w, f = [], []
-    for n, real in ((shape[0], False), (shape[1], False), (shape[2], True)):
-        freq = np.fft.rfftfreq(n) if real else np.fft.fftfreq(n)
-        w.append(2.0 * np.pi * freq / h)
-        f.append(_axis_factor(n, h, real)[1])
+    w, f = _axes(shape, h)
     out = np.empty((6,) + spectrum.shape, np.complex64)
     scale = 4.0 * np.pi * float(r) ** 5
     return _moment_products(spectrum, *w, *f, float(r), scale, scale / 15.0, out)

@@ -297,7 +297,10 @@ def _level_integrals(
         coeffs = _radial_coefficients(spectrum, grid, r, kinds)
         out["V"][:, j], area = spline_at(coeffs[0], u, gradient=True)
         out["area"][:, j] = area / grid.h
-        out["P"][:, j], grad_p = spline_at(coeffs[1], u, gradient=True)
+        if params.principal:  # P's gradient gives the first moments
+            out["P"][:, j], grad_p = spline_at(coeffs[1], u, gradient=True)
+        else:
+            out["P"][:, j] = spline_at(coeffs[1], u)
         if params.sphere_area:
             out["SA"][:, j] = spline_at(coeffs[2], u)
         del coeffs

@@ -111,12 +111,22 @@ def frequency_norm(shape: tuple[int, int, int], h: float) -> np.ndarray:
     return np.sqrt(fx[:, None, None] + fy[None, :, None] + fz[None, None, :])
 
 
+def prefilter_axis(n: int, real: bool) -> np.ndarray:
+    """One axis's factor of :func:`bspline_prefilter` (``real``: the ``rfftfreq`` axis)."""
+    f = np.fft.rfftfreq(n) if real else np.fft.fftfreq(n)
+    return 3.0 / (2.0 + np.cos(2.0 * np.pi * f))
+
+
+def integration_axis(n: int, real: bool) -> np.ndarray:
+    """One axis's factor of :func:`spline_integration` (``real``: the ``rfftfreq`` axis)."""
+    f = np.fft.rfftfreq(n) if real else np.fft.fftfreq(n)
+    x = np.pi * f  # omega h / 2
+    return np.sinc(f) ** 4 * 3.0 / (2.0 + np.cos(2.0 * x))
+
+
 def bspline_prefilter(shape: tuple[int, int, int]) -> np.ndarray:
     """Spectrum that turns samples into cubic B-spline coefficients (1 / the B-spline's DFT)."""
-    def axis(n: int, real: bool) -> np.ndarray:
-        f = np.fft.rfftfreq(n) if real else np.fft.fftfreq(n)
-        return 3.0 / (2.0 + np.cos(2.0 * np.pi * f))
-
+    axis = prefilter_axis
     return (
         axis(shape[0], False)[:, None, None]
         * axis(shape[1], False)[None, :, None]
@@ -205,11 +215,7 @@ def spline_integration(shape: tuple[int, int, int], h: float) -> np.ndarray:
     from a ball do not leak into it as they do through a band-limited kernel.
     Aliases of the spline's spectrum are below 1e-5 of the kernel and neglected.
     """
-    def axis(n: int, real: bool) -> np.ndarray:
-        f = np.fft.rfftfreq(n) if real else np.fft.fftfreq(n)
-        x = np.pi * f  # omega h / 2
-        return np.sinc(f) ** 4 * 3.0 / (2.0 + np.cos(2.0 * x))
-
+    axis = integration_axis
     return (
         axis(shape[0], False)[:, None, None]
         * axis(shape[1], False)[None, :, None]

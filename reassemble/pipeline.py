@@ -226,6 +226,11 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
     less than ``config.retrieval.confidence`` of its break in contact asks too, up to
     ``config.retrieval.max_partners``. Called again on an assembled result, it only asks
     for more (and changes nothing when none are asked for).
+
+    The assemblies that only decide who asks leave out the rounds of registering
+    sub-assemblies against each other (``assembly.group_rounds``); the last assembly, on
+    every pair registered by then, has them. They can only add merges to the greedy ones,
+    and at 100 fragments they took 340 of an assembly's 380 s, paid again in every round.
     """
     t0 = time.perf_counter()
     again = result.assembly is not None
@@ -233,14 +238,18 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
     if progress and not again:
         log.info("assembling %d fragments", len(frags))
     surfaces, meshes = [f.surface for f in frags], [f.mesh for f in frags]
+    # while fragments ask for partners, each assembly only decides who asks: the rounds of
+    # registering sub-assemblies (most of an assembly's time at 100 fragments) wait for the last
+    deferred = result.votes is not None and config.assembly.group_rounds > 0
 
-    def assemble_now():
-        return assembly.assemble(surfaces, meshes, result.pairs, size=size, params=config.assembly,
+    def assemble_now(*, groups_too: bool = True):
+        params = config.assembly if groups_too else dataclasses.replace(config.assembly, group_rounds=0)
+        return assembly.assemble(surfaces, meshes, result.pairs, size=size, params=params,
                                  reg_params=config.registration, seed=config.seed, jobs=jobs, scheduler=scheduler,
                                  memo=groups)
 
     if not again:
-        result.assembly = assemble_now()
+        result.assembly = assemble_now(groups_too=not deferred)
     asked = False
     retrieval = config.retrieval
     while result.votes is not None:
@@ -264,9 +273,11 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
         result.pairs = dict(sorted({**result.pairs, **added}.items()))
         result.timings["pairs"] += time.perf_counter() - t1
         t0 += time.perf_counter() - t1  # the registration counts as pairs, not assembly
-        result.assembly = assemble_now()
+        result.assembly = assemble_now(groups_too=False)
     if again and not asked:
         return
+    if deferred:
+        result.assembly = assemble_now()
     reg = config.registration
     result.T_world = assembly.world_poses(result.assembly, surfaces, gap=config.assembly.world_gap * size)
     result.touching = assembly.contact_points(result.assembly, surfaces, meshes, tol=reg.tolerance * size,

@@ -179,16 +179,22 @@ def _cycle_support(proposals, surfaces, *, reach: float, points: int = 32) -> np
     for i, k in rel:
         others.setdefault(i, set()).add(k)
     support = np.zeros(len(proposals))
-    for x, (i, j, T, _) in enumerate(proposals):
+    by_pair: dict[tuple[int, int], list[int]] = {}
+    for x, (i, j, _, _) in enumerate(proposals):
+        by_pair.setdefault((i, j), []).append(x)
+    for (i, j), xs in by_pair.items():
         pts = surfaces[i].surface[:points]
-        target = transform_points(T, pts)
+        targets = [transform_points(proposals[x][2], pts) for x in xs]
+        # the compositions through k are the same for every proposal of (i, j)
         for k in sorted(others.get(i, set()) & others.get(j, set()) - {i, j}):
             (A, sa), (B, sb) = stacked[(i, k)], stacked[(k, j)]
             C = np.einsum("bij,ajk->baik", B, A)  # (b, a, 4, 4) T_j_k @ T_k_i
             moved = np.einsum("baij,pj->bapi", C[..., :3, :3], pts) + C[:, :, None, :3, 3]
-            agree = np.linalg.norm(moved - target, axis=-1).max(axis=-1) <= reach
-            if agree.any():
-                support[x] += float(np.minimum.outer(sb, sa)[agree].max())
+            both = np.minimum.outer(sb, sa)
+            for x, target in zip(xs, targets):
+                agree = np.linalg.norm(moved - target, axis=-1).max(axis=-1) <= reach
+                if agree.any():
+                    support[x] += float(both[agree].max())
     return support
 
 

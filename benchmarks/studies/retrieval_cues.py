@@ -23,7 +23,11 @@ Cues:
 - ``facets, true labels``: the same on the generator's exact fracture labels;
 - ``true contact regions``: the oracle, each fragment's fracture faces split by the
   neighbour they touch at the true poses, with the same descriptor: the ceiling of any
-  region-shape descriptor this coarse.
+  region-shape descriptor this coarse;
+- ``planar outlines``: planar break faces (:func:`reassemble.planes.planar_patches` on the
+  run's fracture samples) compared by outline, as the planar-mates labelling compares them
+  (each face with its 16 nearest in area and spreads, laid together at the best in-plane
+  turn and shift); a pair scores its best overlap.
 """
 
 from __future__ import annotations
@@ -136,6 +140,28 @@ def region_cue(regions: list[list[np.ndarray]], *, neighbours: int = 10) -> np.n
     return np.maximum(S, S.T)
 
 
+def planar_outlines(surfaces, *, tol: float, plane_area: float, candidates: int = 16, seed: int = 0) -> np.ndarray:
+    """(n, n) per fragment pair, the best outline overlap of a planar break face of one with a
+    plane of the other among its ``candidates`` nearest in log area and spreads: the test of
+    :func:`reassemble.mates.relabel_planar_mates` (``mates._outline_overlap``) as a retrieval cue."""
+    from reassemble.mates import _nearest_similar, _outline_overlap, _Plane
+    from reassemble.planes import planar_patches
+
+    rng = np.random.default_rng(seed)
+    planes = [_Plane(k, True, p) for k, s in enumerate(surfaces) if s.fracture_area > 0
+              for p in planar_patches(s.samples, s.sample_normals, s.sample_area, tol=tol,
+                                      min_area=plane_area * s.fracture_area, rng=rng)]
+    S = np.zeros((len(surfaces), len(surfaces)))
+    for i, near in _nearest_similar(planes, count=candidates):
+        a = planes[i]
+        for j in near:
+            b = planes[j]
+            spacing = np.sqrt(max(surfaces[a.fragment].sample_area, surfaces[b.fragment].sample_area))
+            S[a.fragment, b.fragment] = max(S[a.fragment, b.fragment], _outline_overlap(a.patch, b.patch,
+                                                                                          spacing=spacing))
+    return np.maximum(S, S.T)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("puzzle", type=Path, help="a puzzle folder (ground_truth.json, labels.npz, fragments/)")
@@ -144,7 +170,7 @@ def main() -> int:
     args = parser.parse_args()
     bench = start()
     from reassemble.config import Config
-    from reassemble.pipeline import prepare_fragments, read_puzzle
+    from reassemble.pipeline import prepare_fragments, read_puzzle, registration_params
     from reassemble.retrieval import partner_votes
 
     puzzle = read_puzzle(args.puzzle / "ground_truth.json", with_labels=True)
@@ -161,7 +187,10 @@ def main() -> int:
         "facets": lambda: region_cue([facets(*f.mesh, f.segmentation.fracture) for f in frags]),
         "facets, true labels": lambda: region_cue([facets(*f.mesh, lab) for f, lab in zip(frags, labels)]),
         "true contact regions": lambda: region_cue(contact_regions(frags, gt, size=size)),
+        "planar outlines": lambda: planar_outlines([f.surface for f in frags], tol=reg.tolerance * size,
+                                                   plane_area=reg.plane_area),
     }
+    reg = registration_params(frags, size=size, params=Config().registration)
     rows, figures = [], {"fragments": len(frags), "touching_pairs": int((share >= 0.05).sum() // 2), "cues": {}}
     print(f"touching pairs: {figures['touching_pairs']} of {len(frags) * (len(frags) - 1) // 2}")
     for name, fn in cues.items():

@@ -30,7 +30,7 @@ def registration_params(fragments: list[PreparedFragment], *, size: float, param
     if thin_walled(fragments):
         # one-point hypotheses on strips are many and their local consensus weak (a break
         # curve matches any curve over a short stretch): more of them go on to ICP
-        params = dataclasses.replace(params, shortlist=params.shell_shortlist,
+        params = dataclasses.replace(params, shortlist=params.shell_shortlist + params.shell_whole,
                                      consensus_pool=params.shell_consensus_pool)
     return params
 

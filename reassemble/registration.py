@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .features import FractureSurface, mate_signature, offset_surface
-from .geometry import invert_transform, rotation_angle_deg, rotation_from_vector, transform_points
+from .geometry import farthest_points, invert_transform, rotation_angle_deg, rotation_from_vector, transform_points
 from .planes import planar_patches, plane_placements
 
 
@@ -63,6 +63,9 @@ class RegistrationParams:
         keypoint's tangent plane, not only within ``ransac_tolerance`` of it (:func:`ransac`)
     shell_shortlist, shell_consensus_pool : ``shortlist`` and ``consensus_pool`` of
         thin-walled sherds (:func:`pairs.registration_params`)
+    shell_whole : sherds' hypotheses ranked best by the consensus of the whole fragment
+        (not only around their anchors) that go to the shortlist first, which grows by as
+        many (:func:`_consensus`)
     probe_radius : consensus probes are drawn within this multiple of ``pair_radius`` of a
         hypothesis' anchor keypoint
     probes, shell_probes : probes of the first consensus count of every hypothesis (solids,
@@ -105,6 +108,7 @@ class RegistrationParams:
     plane_consensus: bool = True
     shell_shortlist: int = 100
     shell_consensus_pool: int = 2000
+    shell_whole: int = 25
     probe_radius: float = 2.0
     probes: int = 64
     shell_probes: int = 32
@@ -259,18 +263,56 @@ def ransac(
                       params=params, first=params.probes, rng=rng, plane_tol=plane_tol)
 
 
-def _consensus(T, anchors, source, target, tree, hoods, *, tol, cos_tol, params, first: int, rng, plane_tol=None):
+def _consensus(T, anchors, source, target, tree, hoods, *, tol, cos_tol, params, first: int, rng, plane_tol=None,
+               whole: int = 0):
     """Hypotheses ranked by probe inliers around their anchors (:func:`_inliers`): ``first``
-    probes for all, 256 for the best ``params.consensus_pool``; (h, 4, 4) and (h,), best first."""
-    probes = _draw(hoods, anchors, first, rng)
-    # in chunks, so memory stays bounded (two sherds give up to params.hypotheses at once)
-    inliers = np.concatenate([_inliers(T[k:k + 20000], source, target, tree, probes[k:k + 20000], tol=tol,
-                                       cos_tol=cos_tol, plane_tol=plane_tol) for k in range(0, len(T), 20000)])
+    probes for all, 256 for the best ``params.consensus_pool``; (h, 4, 4) and (h,), best first.
+
+    With ``whole`` > 0, the ``whole`` best by the same counts on keypoints spread over the
+    whole source (:func:`geometry.farthest_points`) join the pool and go first, then the
+    pool in its local order (the same as without them).
+
+    Notes
+    -----
+    Around its anchor, a placement that slides a smooth strip along its mate, or along any
+    smooth strip of the other fragment (a vessel's own rim), fits as well as the true one:
+    on a sherd with a smooth break hundreds of hypotheses have every one of 256 local probes
+    in, and the true ones rank below them. Along the whole break only the true placement
+    keeps fitting, so the whole-fragment count ranks it near the top (a bowl broken in three
+    by smooth cuts: local rank 130-1900 of 2000, whole-fragment rank 0). It is no ranking of
+    its own: rims and bases are strips too, and a wrong placement laying them together can
+    outcount the true one (a vase in four: the true ones' whole-fragment rank 23-1200), so
+    the local ranking keeps its place behind the few taken from the whole.
+    """
+    def count(T, probes):
+        if not len(T):
+            return np.zeros(0, np.int64)
+        # in chunks, so memory stays bounded (two sherds give up to params.hypotheses at once)
+        return np.concatenate([_inliers(T[k:k + 20000], source, target, tree, probes[k:k + 20000], tol=tol,
+                                        cos_tol=cos_tol, plane_tol=plane_tol) for k in range(0, len(T), 20000)])
+
+    def everywhere(h, m):
+        # the same keypoints spread over the whole fragment for every hypothesis: no draws,
+        # so the local ranking's random stream is the one it has without them
+        return np.broadcast_to(farthest_points(source.keypoints, m), (h, min(m, len(source.keypoints))))
+
+    inliers = count(T, _draw(hoods, anchors, first, rng))
     top = np.argsort(-inliers, kind="stable")[: params.consensus_pool]
+    if whole > 0:
+        spread = np.argsort(-count(T, everywhere(len(T), first)), kind="stable")
+        top = np.concatenate([top, spread[~np.isin(spread, top)][:whole]])
     T, anchors = T[top], anchors[top]
-    inliers = _inliers(T, source, target, tree, _draw(hoods, anchors, params.fine_probes, rng), tol=tol, cos_tol=cos_tol,
-                       plane_tol=plane_tol)
-    best = np.argsort(-inliers, kind="stable")
+    local = count(T[: params.consensus_pool], _draw(hoods, anchors[: params.consensus_pool], params.fine_probes, rng))
+    if whole <= 0:
+        best = np.argsort(-local, kind="stable")
+        return T[best], local[best]
+    # the whole-fragment hypotheses' local counts are drawn after the pool's (the same stream for those)
+    inliers = np.concatenate([local, count(T[len(local):], _draw(hoods, anchors[len(local):], params.fine_probes,
+                                                                  rng))])
+    first_whole = np.argsort(-count(T, everywhere(len(T), params.fine_probes)), kind="stable")[:whole]
+    by_local = np.concatenate([np.argsort(-local, kind="stable"),
+                               len(local) + np.argsort(-inliers[len(local):], kind="stable")])
+    best = np.concatenate([first_whole, by_local[~np.isin(by_local, first_whole)]])
     return T[best], inliers[best]
 
 
@@ -312,7 +354,8 @@ def frame_hypotheses(
     T, anchors = np.concatenate(T), np.concatenate([a, a])
     hoods = _neighbourhoods(source.keypoints, anchors, params.probe_radius * radius)
     return _consensus(T, anchors, source, target, cKDTree(target.keypoints), hoods, tol=tol,
-                      cos_tol=np.cos(np.radians(params.normal_angle)), params=params, first=params.shell_probes, rng=rng)
+                      cos_tol=np.cos(np.radians(params.normal_angle)), params=params, first=params.shell_probes, rng=rng,
+                      whole=params.shell_whole)
 
 
 def pair_candidates(source: FractureSurface, target: FractureSurface, pairs: np.ndarray, *, radius: float) -> np.ndarray:

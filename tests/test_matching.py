@@ -66,6 +66,40 @@ def test_kabsch_recovers_transform(rng):
     assert np.allclose(kabsch(a, b), T[None], atol=1e-9)
 
 
+def test_whole_fragment_consensus_adds_hypotheses_in_front_of_an_unchanged_local_ranking(rng):
+    """``_consensus(whole=k)``: k hypotheses best over the whole fragment first, then the
+    pool in exactly the order (and from the same random stream) it has without them."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from scipy.spatial import cKDTree
+
+    from reassemble.geometry import make_transform
+    from reassemble.registration import RegistrationParams, _consensus, _neighbourhoods
+
+    pts = rng.uniform(-1.0, 1.0, (200, 3))
+    nrm = rng.normal(size=(200, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    source = SimpleNamespace(keypoints=pts, keypoint_normals=nrm, keypoint_tangents=None)
+    target = SimpleNamespace(keypoints=pts, keypoint_normals=-nrm, keypoint_tangents=None)
+    T = np.array([make_transform(random_rotation(rng) if k % 3 else np.eye(3), rng.normal(0.0, 0.05 * (k % 5), 3))
+                  for k in range(300)])
+    anchors = rng.integers(0, 200, 300)
+    hoods = _neighbourhoods(pts, anchors, 0.5)
+    params = dataclasses.replace(RegistrationParams(), consensus_pool=100)
+    common = dict(tol=0.05, cos_tol=np.cos(np.radians(30.0)), params=params, first=16)
+    T0, n0 = _consensus(T, anchors, source, target, cKDTree(pts), hoods, rng=np.random.default_rng(1), **common)
+    T5, n5 = _consensus(T, anchors, source, target, cKDTree(pts), hoods, rng=np.random.default_rng(1), whole=5,
+                        **common)
+    assert len(T0) == 100 and 100 <= len(T5) <= 105
+    # the local ranking, without the whole-fragment five, is the same
+    rest = [k for k in range(len(T5)) if not any(np.array_equal(T5[k], T5[j]) for j in range(5))]
+    kept = [k for k in range(100) if not any(np.array_equal(T0[k], T5[j]) for j in range(5))]
+    assert np.array_equal(T5[rest][: len(kept)], T0[kept]) and np.array_equal(n5[rest][: len(kept)], n0[kept])
+    # the five: the identity-like placements (every keypoint on its mate) come first
+    assert all(rotation_angle_deg(T5[j][:3, :3], np.eye(3)) < 1e-9 for j in range(5))
+
+
 def test_mate_signature_flips_mean_curvature_only():
     sig = np.array([[0.1, -0.2, 0.3, 0.4]])
     assert np.allclose(mate_signature(sig), [[-0.1, 0.2, 0.3, 0.4]])

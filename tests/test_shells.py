@@ -46,6 +46,24 @@ def test_sherds_are_reassembled(bowl, tmp_path):
 
 
 @pytest.mark.slow
+def test_sherds_with_a_smooth_break_are_reassembled(tmp_path):
+    """A bowl broken by smooth cuts: every placement sliding a strip along a smooth strip (the
+    break's mate or the bowl's own rim) fits locally; the whole break places it
+    (``registration._consensus``, ``wide``). Unsolved (1 of 3 right) with local consensus alone."""
+    import manifold3d as m3
+
+    shell = (m3.Manifold.sphere(1.0, 96) - m3.Manifold.sphere(0.92, 96)
+             - m3.Manifold.cube([4.0, 4.0, 4.0], center=True).translate([0.0, 0.0, 2.3]))
+    mesh = shell.to_mesh()
+    write_ply(tmp_path / "bowl.ply", np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts))
+    break_to_folder(tmp_path / "bowl.ply", tmp_path / "puzzle", params=BreakParams(pieces=3, style="smooth"), seed=0)
+    report = run_to_folder([tmp_path / "puzzle" / "fragments"], tmp_path / "out", seed=0)
+    assert report["summary"]["thin_walled"]
+    s = _score(tmp_path / "out", tmp_path / "puzzle")
+    assert s["solved"], s
+
+
+@pytest.mark.slow
 def test_one_keypoint_pair_recovers_a_known_motion(bowl, rng):
     """Two mating sherds, the source moved by a seeded rigid motion: the frame hypotheses
     and ICP find it back (top candidate within 1 degree and 0.5 % of the size)."""

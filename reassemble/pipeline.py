@@ -238,8 +238,6 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
     if progress and not again:
         log.info("assembling %d fragments", len(frags))
     surfaces, meshes = [f.surface for f in frags], [f.mesh for f in frags]
-    # while fragments ask for partners, each assembly only decides who asks: the rounds of
-    # registering sub-assemblies (most of an assembly's time at 100 fragments) wait for the last
     deferred = result.votes is not None and config.assembly.group_rounds > 0
 
     def assemble_now(*, groups_too: bool = True):

@@ -230,7 +230,8 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
     The assemblies that only decide who asks leave out the rounds of registering
     sub-assemblies against each other (``assembly.group_rounds``); the last assembly, on
     every pair registered by then, has them. They can only add merges to the greedy ones,
-    and at 100 fragments they took 340 of an assembly's 380 s, paid again in every round.
+    and on 100 Voronoi cells they made an assembly of 1 s take 338 s
+    (``benchmarks/studies/assembly_rounds.py``), paid again in every round.
     """
     t0 = time.perf_counter()
     again = result.assembly is not None

@@ -184,17 +184,17 @@ def _cycle_support(proposals, surfaces, *, reach: float, points: int = 32) -> np
         by_pair.setdefault((i, j), []).append(x)
     for (i, j), xs in by_pair.items():
         pts = surfaces[i].surface[:points]
-        targets = [transform_points(proposals[x][2], pts) for x in xs]
+        targets = np.array([transform_points(proposals[x][2], pts) for x in xs])  # (c, p, 3)
         # the compositions through k are the same for every proposal of (i, j)
         for k in sorted(others.get(i, set()) & others.get(j, set()) - {i, j}):
             (A, sa), (B, sb) = stacked[(i, k)], stacked[(k, j)]
             C = np.einsum("bij,ajk->baik", B, A)  # (b, a, 4, 4) T_j_k @ T_k_i
             moved = np.einsum("baij,pj->bapi", C[..., :3, :3], pts) + C[:, :, None, :3, 3]
-            both = np.minimum.outer(sb, sa)
-            for x, target in zip(xs, targets):
-                agree = np.linalg.norm(moved - target, axis=-1).max(axis=-1) <= reach
-                if agree.any():
-                    support[x] += float(both[agree].max())
+            agree = np.linalg.norm(moved[None] - targets[:, None, None], axis=-1).max(axis=-1) <= reach  # (c, b, a)
+            both = np.where(agree, np.minimum.outer(sb, sa)[None], -np.inf).max(axis=(1, 2))
+            for x, best in zip(xs, both):
+                if best > -np.inf:
+                    support[x] += float(best)
     return support
 
 

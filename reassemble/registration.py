@@ -292,10 +292,13 @@ def _consensus(T, anchors, source, target, tree, hoods, *, tol, cos_tol, params,
         return np.concatenate([_inliers(T[k:k + 20000], source, target, tree, probes[k:k + 20000], tol=tol,
                                         cos_tol=cos_tol, plane_tol=plane_tol) for k in range(0, len(T), 20000)])
 
+    # the same keypoints spread over the whole fragment for every hypothesis: no draws, so
+    # the local ranking's random stream is the one it has without them; the farthest-point
+    # order is greedy, so the first m of it are the m spread points
+    spread_order = farthest_points(source.keypoints, max(first, params.fine_probes)) if whole > 0 else None
+
     def everywhere(h, m):
-        # the same keypoints spread over the whole fragment for every hypothesis: no draws,
-        # so the local ranking's random stream is the one it has without them
-        return np.broadcast_to(farthest_points(source.keypoints, m), (h, min(m, len(source.keypoints))))
+        return np.broadcast_to(spread_order[:m], (h, min(m, len(source.keypoints))))
 
     inliers = count(T, _draw(hoods, anchors, first, rng))
     top = np.argsort(-inliers, kind="stable")[: params.consensus_pool]

@@ -1,12 +1,12 @@
-"""The distance band of D2_r (descriptors.closest) against brute force over every triangle."""
+"""The distance band of D2_r (descriptors.closest) and the bounded closest-triangle queries
+(descriptors.tree) against brute force over every triangle."""
 
 import numpy as np
 import pytest
 import trimesh
 
 from reassemble.descriptors.closest import MeshDistance
-from reassemble.descriptors.voxelize import _closest_faces, make_grid
-from reassemble.geometry import make_scene
+from reassemble.descriptors.voxelize import make_grid
 
 
 def brute_force_distance(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -58,9 +58,7 @@ def test_band_equals_brute_force(name, V, F):
     h = 0.05
     exact, limit = 0.15, 0.25
     grid = make_grid(V.min(axis=0), V.max(axis=0), h=h, margin=limit + 2 * h)
-    scene = make_scene(V, F)
-    where, dist2 = MeshDistance(V, F).band(grid.origin, h, grid.shape, limit, exact,
-                                           fallback=lambda idx: _closest_faces(scene, grid, idx))
+    where, dist2 = MeshDistance(V, F).band(grid.origin, h, grid.shape, limit, exact)
     assert len(np.unique(where)) == len(where)
     def at(idx):
         return grid.origin + h * np.column_stack(np.unravel_index(idx, grid.shape))
@@ -74,3 +72,26 @@ def test_band_equals_brute_force(name, V, F):
     assert err.min() > -1e-9 * h  # a distance to some triangle: never below the true one
     zone = truth <= exact
     assert err[zone].max() < 1e-9 * h
+
+
+@pytest.mark.parametrize("name,V,F", [s for s in shapes() if s[0] in ("box", "walls")], ids=["box", "walls"])
+def test_tree_query_equals_brute_force(name, V, F):
+    V, F = np.asarray(V, float), np.asarray(F, np.int64)
+    distance = MeshDistance(V, F)
+    lo, hi = V.min(axis=0) - 0.3, V.max(axis=0) + 0.3
+    points = np.random.default_rng(1).uniform(lo, hi, (4000, 3))
+    truth = brute_force_distance(points, V, F)
+    tri, dist2 = distance.tree.closest(points, np.inf)
+    assert np.abs(np.sqrt(dist2) - truth).max() < 1e-12
+    assert np.all(tri >= 0)
+    # the triangle it names is at that distance
+    named = [brute_force_distance(points[s:s + 1], V, F[tri[s]:tri[s] + 1])[0] for s in range(0, 4000, 20)]
+    assert np.abs(np.array(named) - truth[::20]).max() < 1e-12
+    # bounded: the distance where it is nearer than the bound, else the bound and no triangle
+    bound = 0.1
+    got = distance.nearest(points, bound)
+    near = truth < bound
+    assert np.abs(got[near] - truth[near]).max() < 1e-12
+    assert np.all(got[~near] == bound)
+    tri3, _ = distance.tree.closest(points, bound**2)
+    assert np.all((tri3 >= 0) == near)

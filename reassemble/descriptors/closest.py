@@ -6,8 +6,8 @@ by layer (26 neighbours). A voxel starts from the closest triangles of its face 
 of earlier layers and descends on the mesh: it moves to any triangle sharing a vertex with
 the current one that is closer, until none is. A step costs a dozen exact point-triangle
 distances and the start is within about a voxel of the answer, so a voxel costs a few
-dozen distances whatever the mesh's size, where a tree query (Open3D, libigl's AABB) costs
-7-19 us and slows down with the distance from the surface.
+dozen distances whatever the mesh's size, where an unbounded tree query (Open3D, libigl's
+AABB) costs 7-19 us and slows down with the distance from the surface.
 
 The descent finds the closest triangle wherever the distance over the mesh has one minimum
 near the start. Where it has several (two fronts meeting, concave pockets),
@@ -20,95 +20,11 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from .tree import TriangleTree
+from .triangle import tri_closest, tri_dist2
+
 # TBB, numba's first choice, warns when the system's is too old; OpenMP ships with numba
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
-
-
-@njit(cache=True, inline="always")
-def _tri_dist2(px, py, pz, T, t):
-    """Squared distance from p to triangle t, whose row of T is (a, b - a, c - a)
-    (Ericson, Real-Time Collision Detection, 5.1.5)."""
-    ax, ay, az = T[t, 0], T[t, 1], T[t, 2]
-    abx, aby, abz = T[t, 3], T[t, 4], T[t, 5]
-    acx, acy, acz = T[t, 6], T[t, 7], T[t, 8]
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
-    if d1 <= 0.0 and d2 <= 0.0:
-        return apx * apx + apy * apy + apz * apz
-    bpx, bpy, bpz = apx - abx, apy - aby, apz - abz
-    d3 = abx * bpx + aby * bpy + abz * bpz
-    d4 = acx * bpx + acy * bpy + acz * bpz
-    if d3 >= 0.0 and d4 <= d3:
-        return bpx * bpx + bpy * bpy + bpz * bpz
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = d1 / (d1 - d3)
-        qx, qy, qz = apx - v * abx, apy - v * aby, apz - v * abz
-        return qx * qx + qy * qy + qz * qz
-    cpx, cpy, cpz = apx - acx, apy - acy, apz - acz
-    d5 = abx * cpx + aby * cpy + abz * cpz
-    d6 = acx * cpx + acy * cpy + acz * cpz
-    if d6 >= 0.0 and d5 <= d6:
-        return cpx * cpx + cpy * cpy + cpz * cpz
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = d2 / (d2 - d6)
-        qx, qy, qz = apx - w * acx, apy - w * acy, apz - w * acz
-        return qx * qx + qy * qy + qz * qz
-    va = d3 * d6 - d5 * d4
-    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        qx = bpx - w * (acx - abx)
-        qy = bpy - w * (acy - aby)
-        qz = bpz - w * (acz - abz)
-        return qx * qx + qy * qy + qz * qz
-    denom = 1.0 / (va + vb + vc)
-    v = vb * denom
-    w = vc * denom
-    qx = apx - abx * v - acx * w
-    qy = apy - aby * v - acy * w
-    qz = apz - abz * v - acz * w
-    return qx * qx + qy * qy + qz * qz
-
-
-@njit(cache=True, inline="always")
-def _tri_closest(px, py, pz, T, t):
-    """The point of triangle t closest to p (same regions as :func:`_tri_dist2`)."""
-    ax, ay, az = T[t, 0], T[t, 1], T[t, 2]
-    abx, aby, abz = T[t, 3], T[t, 4], T[t, 5]
-    acx, acy, acz = T[t, 6], T[t, 7], T[t, 8]
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
-    if d1 <= 0.0 and d2 <= 0.0:
-        return ax, ay, az
-    bpx, bpy, bpz = apx - abx, apy - aby, apz - abz
-    d3 = abx * bpx + aby * bpy + abz * bpz
-    d4 = acx * bpx + acy * bpy + acz * bpz
-    if d3 >= 0.0 and d4 <= d3:
-        return ax + abx, ay + aby, az + abz
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = d1 / (d1 - d3)
-        return ax + v * abx, ay + v * aby, az + v * abz
-    cpx, cpy, cpz = apx - acx, apy - acy, apz - acz
-    d5 = abx * cpx + aby * cpy + abz * cpz
-    d6 = acx * cpx + acy * cpy + acz * cpz
-    if d6 >= 0.0 and d5 <= d6:
-        return ax + acx, ay + acy, az + acz
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = d2 / (d2 - d6)
-        return ax + w * acx, ay + w * acy, az + w * acz
-    va = d3 * d6 - d5 * d4
-    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        return ax + abx + w * (acx - abx), ay + aby + w * (acy - aby), az + abz + w * (acz - abz)
-    denom = 1.0 / (va + vb + vc)
-    v = vb * denom
-    w = vc * denom
-    return ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
 
 
 @njit(cache=True, inline="always")
@@ -116,7 +32,7 @@ def _closer(px, py, pz, T, g, bt, best):
     """(triangle, squared distance): ``g`` where it is closer to the point than ``best``
     (that of triangle ``bt``), else ``bt``, ``best``."""
     if g != bt:
-        d = _tri_dist2(px, py, pz, T, g)
+        d = tri_dist2(px, py, pz, T, g)
         if d < best:
             return g, d
     return bt, best
@@ -160,7 +76,7 @@ def _suspects(where, T, tri, dist2, origin, h, nx, ny, nz, pos, exact2, spread):
         k = q % nz
         j = (q // nz) % ny
         i = q // (ny * nz)
-        foot[s, 0], foot[s, 1], foot[s, 2] = _tri_closest(origin[0] + h * i, origin[1] + h * j,
+        foot[s, 0], foot[s, 1], foot[s, 2] = tri_closest(origin[0] + h * i, origin[1] + h * j,
                                                           origin[2] + h * k, T, tri[s])
     flag = np.zeros(b, np.bool_)
     s2 = spread * spread
@@ -229,7 +145,7 @@ def _dist2_to(where, tri, T, origin, h, ny, nz):
         k = q % nz
         j = (q // nz) % ny
         i = q // (ny * nz)
-        out[s] = _tri_dist2(origin[0] + h * i, origin[1] + h * j, origin[2] + h * k, T, tri[s])
+        out[s] = tri_dist2(origin[0] + h * i, origin[1] + h * j, origin[2] + h * k, T, tri[s])
     return out
 
 
@@ -290,7 +206,7 @@ def _descend(px, py, pz, T, nptr, nidx, t, best):
         nt = t
         for k in range(nptr[t], nptr[t + 1]):
             g = nidx[k]
-            d = _tri_dist2(px, py, pz, T, g)
+            d = tri_dist2(px, py, pz, T, g)
             if d < best:
                 best = d
                 nt = g
@@ -323,7 +239,7 @@ def _seeds(T, origin, h, nx, ny, nz, layer, tri, dist2):
                 if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
                     continue
                 q = (i * ny + j) * nz + k
-                d = _tri_dist2(origin[0] + h * i, origin[1] + h * j, origin[2] + h * k, T, t)
+                d = tri_dist2(origin[0] + h * i, origin[1] + h * j, origin[2] + h * k, T, t)
                 if layer[q] < 0:
                     layer[q] = 0
                     tri[q] = t
@@ -354,7 +270,7 @@ def _solve_layer(front, L, T, nptr, nidx, origin, h, nx, ny, nz, layer, tri, dis
         bt = tri[q]
         best = np.inf
         if bt >= 0:
-            best = _tri_dist2(px, py, pz, T, bt)
+            best = tri_dist2(px, py, pz, T, bt)
         found = False
         for a in range(6):
             ii, jj, kk = i, j, k
@@ -449,8 +365,9 @@ class MeshDistance:
     neighbouring voxels (a smooth surface moves it at most ``R / (R - d)`` times the step, on
     its concave side at distance d from curvature radius R). Those voxels and their
     neighbours are relaxed (every neighbour's triangle tried, then the descent) until nothing
-    changes; the voxels still jumping within the exact zone are asked of ``fallback``, an
-    exact tree query (a few percent of the voxels, near medial surfaces).
+    changes; the voxels still jumping within the exact zone (a few percent of them, near
+    medial surfaces) are asked of :class:`.tree.TriangleTree`, bounded by the distance
+    they have: exact, and cheap because the bound is tight.
 
     On a triangle set whose parts overlap or intersect (surfaces left by
     :func:`repair.repair_surface`), a part's Voronoi region can be thinner than a voxel
@@ -461,13 +378,26 @@ class MeshDistance:
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
         V = np.ascontiguousarray(vertices, dtype=np.float64)
-        F = np.ascontiguousarray(faces, dtype=np.int64)
-        self.nptr, self.nidx = _face_neighbours(F, len(V))
-        a = V[F[:, 0]]
-        self.T = np.ascontiguousarray(np.hstack([a, V[F[:, 1]] - a, V[F[:, 2]] - a]))
+        self._F, self._n_vertices = np.ascontiguousarray(faces, dtype=np.int64), len(V)
+        a = V[self._F[:, 0]]
+        self.T = np.ascontiguousarray(np.hstack([a, V[self._F[:, 1]] - a, V[self._F[:, 2]] - a]))
+        self._neighbours = None
+        self.tree = TriangleTree(self.T)
+
+    @property
+    def neighbours(self) -> tuple[np.ndarray, np.ndarray]:
+        """CSR (ptr, idx) of the faces sharing a vertex with each face (the descent's steps)."""
+        if self._neighbours is None:
+            self._neighbours = _face_neighbours(self._F, self._n_vertices)
+        return self._neighbours
+
+    def nearest(self, points: np.ndarray, bound: float = np.inf) -> np.ndarray:
+        """(n,) exact distance from each of the points (n, 3) to the mesh, or ``bound`` where
+        the mesh is no nearer than that (:class:`.tree.TriangleTree`)."""
+        return np.sqrt(self.tree.closest(points, float(bound) ** 2)[1])
 
     def band(self, origin: np.ndarray, h: float, shape: tuple[int, int, int], limit: float,
-             exact: float, fallback=None) -> tuple[np.ndarray, np.ndarray]:
+             exact: float) -> tuple[np.ndarray, np.ndarray]:
         """Every voxel within ``limit`` of the mesh, with its squared distance.
 
         Parameters
@@ -476,9 +406,6 @@ class MeshDistance:
         limit : distance up to which every voxel is found (some up to a voxel beyond it too)
         exact : distance within which every value is exact; beyond, a value may exceed the
             distance where the propagation went wrong (rare, near medial surfaces)
-        fallback : callable, flat voxel indices (k,) -> (k,) index of a closest face (an
-            exact query, in any precision: the distance is then computed here in float64);
-            None: the voxels it would be asked for keep their propagated values
 
         Returns
         -------
@@ -489,8 +416,9 @@ class MeshDistance:
         nx, ny, nz = (int(n) for n in shape)
         h = float(h)
         exact2 = float(exact) ** 2
+        nptr, nidx = self.neighbours
         # beyond the zone, the best of the neighbours' triangles, without the descent
-        where, dist2, tri = _band(self.T, self.nptr, self.nidx, origin, h, (nx, ny, nz), float(limit) ** 2,
+        where, dist2, tri = _band(self.T, nptr, nidx, origin, h, (nx, ny, nz), float(limit) ** 2,
                                   (float(exact) + 2.0 * h) ** 2)
         pos = np.full(nx * ny * nz, -1, np.int64)
         pos[where] = np.arange(len(where))
@@ -498,15 +426,14 @@ class MeshDistance:
         sel = _dilate(np.flatnonzero(flag), where, nx, ny, nz, pos)
         for _ in range(RELAX_ROUNDS):
             new_tri, new_dist2 = tri.copy(), dist2.copy()
-            changed = _relax(where, sel, self.T, self.nptr, self.nidx, tri, dist2, origin, h, nx, ny, nz, pos,
+            changed = _relax(where, sel, self.T, nptr, nidx, tri, dist2, origin, h, nx, ny, nz, pos,
                              new_tri, new_dist2)
             tri, dist2 = new_tri, new_dist2
             if changed == 0:
                 break
-        if fallback is not None:
-            flag = _suspects(where, self.T, tri, dist2, origin, h, nx, ny, nz, pos, exact2, SPREAD)
-            if flag.any():
-                asked = where[flag]
-                d2 = _dist2_to(asked, np.asarray(fallback(asked), np.int64), self.T, origin, h, ny, nz)
-                dist2[flag] = np.minimum(dist2[flag], d2)
+        flag = _suspects(where, self.T, tri, dist2, origin, h, nx, ny, nz, pos, exact2, SPREAD)
+        if flag.any():  # the tree's query, bounded by the propagated distance: exact
+            asked = where[flag]
+            ijk = np.column_stack(np.unravel_index(asked, (nx, ny, nz)))
+            dist2[flag] = self.tree.closest(origin + h * ijk, dist2[flag])[1]
         return where, dist2

@@ -39,6 +39,7 @@ import numpy as np
 from ..errors import ReassembleError
 from ..geometry import make_scene
 from ..repair import is_closed_solid
+from .closest import MeshDistance
 from .compiled import BALL, BALL_MOMENT2, SPHERE, moment_products, radial_products, spline_at
 from .tiles import DISTANCE_PAD, check_fits, plan_tiles, tile_offset
 from .voxelize import (
@@ -374,7 +375,7 @@ def _check_memory(vertices: np.ndarray, radii: np.ndarray, params: DescriptorPar
 
 
 def _volume_integrals(
-    scene, vertices: np.ndarray, faces: np.ndarray, winding, radii: np.ndarray, points: np.ndarray,
+    scene, distance, vertices: np.ndarray, faces: np.ndarray, winding, radii: np.ndarray, points: np.ndarray,
     params: DescriptorParams, timings: dict,
 ) -> dict[str, np.ndarray]:
     """V_r, P_r, SA_r, the area vectors (and, with ``params.principal``, the covariance
@@ -385,6 +386,7 @@ def _volume_integrals(
     Parameters
     ----------
     scene : ray-casting scene of the mesh (:func:`geometry.make_scene`)
+    distance : its :class:`closest.MeshDistance`
     vertices : (v, 3) float64, faces : (f, 3) int64
     winding : None for a closed solid (inside by ray parity), else the surface's
         :class:`repair.WindingNumber` (inside where it exceeds 1/2)
@@ -407,11 +409,11 @@ def _volume_integrals(
         for tile, rows in tiles:
             t = time.perf_counter()
             if winding is None:
-                occ = occupancy(scene, tile, width=params.antialias, ray_start=start)
+                occ = occupancy(scene, distance, tile, width=params.antialias, ray_start=start)
             else:
                 frame = None if tile is grid else (tile_offset(tile, grid), grid.shape)
                 occ = winding_occupancy(scene, vertices, faces, tile, width=params.antialias, winding=winding,
-                                        ray_start=start, frame=frame)
+                                        distance=distance, ray_start=start, frame=frame)
             _add_time(timings, "voxelize", t)
             t = time.perf_counter()
             spectrum = rfftn(occ, workers=-1)
@@ -426,7 +428,7 @@ def _volume_integrals(
 
 
 def _distance_integrals(
-    scene, vertices: np.ndarray, faces: np.ndarray, winding, radii: np.ndarray, points: np.ndarray,
+    scene, distance, vertices: np.ndarray, faces: np.ndarray, winding, radii: np.ndarray, points: np.ndarray,
     params: DescriptorParams, timings: dict,
 ) -> dict[str, np.ndarray]:
     """D2_r, SD2_r and D_r at the points: the squared distance to the surface integrated over
@@ -434,7 +436,8 @@ def _distance_integrals(
 
     Parameters
     ----------
-    scene, vertices, faces, winding, radii, points, params, timings : as in :func:`_volume_integrals`
+    scene, distance, vertices, faces, winding, radii, points, params, timings : as in
+        :func:`_volume_integrals`
 
     Returns
     -------
@@ -448,19 +451,14 @@ def _distance_integrals(
     points in a ball about a surface point lie within r of the surface, so beyond the band it
     is rolled off to ±c (:func:`voxelize.saturated_signed`) without changing D_r.
     """
-    from .closest import MeshDistance
-
     out = {key: np.full((len(points), len(radii)), np.nan) for key in ("D2", "SD2", "D")}
-    t = time.perf_counter()
-    distance = MeshDistance(vertices, faces)  # one face adjacency for every radius
-    _add_time(timings, "distance", t)
     for i, r in enumerate(radii):
         grid, tiling = _distance_grid(vertices, r, params, winding)
         tiles = plan_tiles(grid, points, max_memory=params.max_memory, **tiling)
         start = None if tiles[0][0] is grid else vertices.min(axis=0) - grid.h
         for tile, rows in tiles:
             frame = None if tile is grid else (tile_offset(tile, grid), grid.shape)
-            values = _distance_tile(scene, vertices, faces, winding, distance, tile, r, points[rows], params,
+            values = _distance_tile(scene, distance, vertices, faces, winding, tile, r, points[rows], params,
                                     timings, ray_start=start, frame=frame)
             for key, value in values.items():
                 out[key][rows, i] = value
@@ -470,15 +468,14 @@ def _distance_integrals(
 
 
 def _distance_tile(
-    scene, vertices: np.ndarray, faces: np.ndarray, winding, distance, grid: Grid, r: float, points: np.ndarray,
+    scene, distance, vertices: np.ndarray, faces: np.ndarray, winding, grid: Grid, r: float, points: np.ndarray,
     params: DescriptorParams, timings: dict, *, ray_start: np.ndarray | None = None, frame=None,
 ) -> dict[str, np.ndarray]:
     """D2_r, SD2_r and D_r of one radius at the points, from one grid (the whole one, or a tile).
 
     Parameters
     ----------
-    scene, vertices, faces, winding, params, timings : as in :func:`_volume_integrals`
-    distance : :class:`closest.MeshDistance` of the surface
+    scene, distance, vertices, faces, winding, params, timings : as in :func:`_volume_integrals`
     grid : Grid of spacing ``r / params.d2_resolution``
     r : radius
     points : (n, 3) query points, inside the grid's reach
@@ -494,8 +491,8 @@ def _distance_tile(
     exact, band = r + h, r + 5 * h  # as _distance_grid
     out = {}
     t = time.perf_counter()
-    near = distance_band(distance, scene, grid, r=exact, band=band)
-    sq = squared_distance(distance, scene, grid, r=exact, band=band, near=near)
+    near = distance_band(distance, grid, r=exact, band=band)
+    sq = squared_distance(distance, grid, r=exact, band=band, near=near)
     _add_time(timings, "distance", t)
     t = time.perf_counter()
     spectrum = rfftn(sq, workers=-1)
@@ -511,7 +508,7 @@ def _distance_tile(
         inside = inside_centres(scene, grid, ray_start=ray_start)
     else:
         inside = winding_occupancy(scene, vertices, faces, grid, width=params.antialias, winding=winding,
-                                   ray_start=ray_start, frame=frame) > 0.5
+                                   distance=distance, ray_start=ray_start, frame=frame) > 0.5
     spectrum = rfftn(signed_distance(near, inside, r=exact, band=band), workers=-1)
     del inside, near
     c = float(saturated_signed(np.array(band), exact, band))
@@ -555,6 +552,7 @@ def integral_invariants(
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     scene = make_scene(vertices, faces)
+    distance = MeshDistance(vertices, faces)  # one tree (and face adjacency) for every grid
     winding = None
     if not is_closed_solid(faces):  # an open or non-manifold surface (repair.repair_surface)
         from ..repair import WindingNumber
@@ -563,10 +561,10 @@ def integral_invariants(
     timings["bvh"] = time.perf_counter() - t0
     _check_memory(vertices, radii, params, winding)
 
-    vol = _volume_integrals(scene, vertices, faces, winding, radii, points, params, timings)
+    vol = _volume_integrals(scene, distance, vertices, faces, winding, radii, points, params, timings)
     nan = np.full((len(points), len(radii)), np.nan)
     if params.with_d2:
-        dist = _distance_integrals(scene, vertices, faces, winding, radii, points, params, timings)
+        dist = _distance_integrals(scene, distance, vertices, faces, winding, radii, points, params, timings)
     else:
         dist = {"D2": nan, "SD2": nan.copy(), "D": nan.copy()}
 

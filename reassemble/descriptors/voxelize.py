@@ -137,14 +137,15 @@ def _either_side(changes: list[np.ndarray]) -> np.ndarray:
     return boundary
 
 
-def occupancy(scene, grid: Grid, *, width: float = 2.0, ray_start: np.ndarray | None = None) -> np.ndarray:
+def occupancy(scene, distance, grid: Grid, *, width: float = 2.0, ray_start: np.ndarray | None = None) -> np.ndarray:
     """Anti-aliased occupancy ``clip(0.5 - sdf / (width h), 0, 1)`` of a closed mesh.
 
     Exact distances are computed only for voxels near the surface (where the value is
     fractional); the sign comes from ray parity. This equals the mean, over offsets
     t uniform in [-w/2, w/2], of the indicator of the solid grown by t: a symmetric
     smoothing whose small curvature bias (variance w^2/12) is removed analytically
-    downstream. ``ray_start``: as :func:`inside_centres`.
+    downstream. ``distance``: the mesh's :class:`closest.MeshDistance`. ``ray_start``: as
+    :func:`inside_centres`.
 
     Returns
     -------
@@ -157,7 +158,7 @@ def occupancy(scene, grid: Grid, *, width: float = 2.0, ray_start: np.ndarray | 
     # boundary voxels lie within one step of the surface; the ramp reaches width/2 beyond
     band = binary_dilation(boundary, iterations=max(1, int(np.ceil(width / 2))))
     where = np.flatnonzero(band)
-    d = _distances(scene, grid, where)
+    d = _ramp_distances(distance, grid, where, 0.5 * width * grid.h)
     sdf = np.where(inside.ravel()[where], -d, d)
     occ = inside.astype(np.float32).ravel()
     occ[where] = np.clip(0.5 - sdf / (width * grid.h), 0.0, 1.0)
@@ -165,7 +166,7 @@ def occupancy(scene, grid: Grid, *, width: float = 2.0, ray_start: np.ndarray | 
 
 
 def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid, *,
-                      width: float = 2.0, winding=None, ray_start: np.ndarray | None = None,
+                      width: float = 2.0, winding=None, distance=None, ray_start: np.ndarray | None = None,
                       frame=None) -> np.ndarray:
     """Anti-aliased occupancy of any triangle set, from its generalized winding number.
 
@@ -173,7 +174,8 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     distance to the triangles and the side from the winding number ``w`` (inside where
     ``w >= 1/2``); beyond the ramp, ``clip(w, 0, 1)``: 1 where shells overlap, a smooth
     transition across holes. ``winding``: the set's :class:`repair.WindingNumber`, when the
-    caller evaluates several grids of it (built here otherwise). ``ray_start``: where the
+    caller evaluates several grids of it (built here otherwise); ``distance``: its
+    :class:`closest.MeshDistance`, likewise. ``ray_start``: where the
     column rays start, as :func:`inside_centres` (the running sum counts from there).
     ``frame``: for a tile of a larger grid spanning all of its z, (offset (3,) int of the
     tile in it, its shape): the columns checked are those the larger grid checks, so the
@@ -200,6 +202,7 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     from scipy.ndimage import binary_dilation
 
     from ..repair import WindingNumber
+    from .closest import MeshDistance
 
     vertices = np.asarray(vertices, np.float64)
     winding = winding or WindingNumber(vertices, faces)
@@ -224,7 +227,7 @@ def winding_occupancy(scene, vertices: np.ndarray, faces: np.ndarray, grid: Grid
     boundary[col_i, col_j, k[inner] - 1] = True
     band = binary_dilation(boundary, iterations=max(1, int(np.ceil(width / 2))))
     where = np.flatnonzero(band)
-    d = _distances(scene, grid, where)
+    d = _ramp_distances(distance or MeshDistance(vertices, faces), grid, where, 0.5 * width * grid.h)
     ramp = np.clip(0.5 - np.where(inside.ravel()[where], -d, d) / (width * grid.h), 0.0, 1.0)
     occ = np.clip(w, 0.0, 1.0).ravel()
     near_surface = d < 0.5 * width * grid.h
@@ -395,25 +398,7 @@ def saturated_signed(d: np.ndarray, r: float, band: float) -> np.ndarray:
     return np.where(a <= r, d, np.sign(d) * tail)
 
 
-def _distances(scene, grid: Grid, where: np.ndarray) -> np.ndarray:
-    """Exact distances to the surface at the voxels with flat indices ``where``."""
-    import open3d as o3d
-
-    ijk = np.column_stack(np.unravel_index(where, grid.shape))
-    pts = (grid.origin + grid.h * ijk).astype(np.float32)
-    return scene.compute_distance(o3d.core.Tensor(pts)).numpy().astype(np.float64)
-
-
-def _closest_faces(scene, grid: Grid, where: np.ndarray) -> np.ndarray:
-    """Index of a closest face to the voxels with flat indices ``where`` (Open3D, float32)."""
-    import open3d as o3d
-
-    ijk = np.column_stack(np.unravel_index(where, grid.shape))
-    pts = (grid.origin + grid.h * ijk).astype(np.float32)
-    return scene.compute_closest_points(o3d.core.Tensor(pts))["primitive_ids"].numpy().astype(np.int64)
-
-
-def distance_band(distance, scene, grid: Grid, *, r: float, band: float) -> tuple[np.ndarray, np.ndarray]:
+def distance_band(distance, grid: Grid, *, r: float, band: float) -> tuple[np.ndarray, np.ndarray]:
     """The voxels within ``band`` of the surface and their squared distances, exact within ``r``
     plus two voxels (:meth:`closest.MeshDistance.band`; the arguments as :func:`squared_distance`).
 
@@ -421,8 +406,14 @@ def distance_band(distance, scene, grid: Grid, *, r: float, band: float) -> tupl
     -------
     where : (b,) int64 flat voxel indices; dist2 : (b,) float64
     """
-    return distance.band(grid.origin, grid.h, grid.shape, band, r + 2 * grid.h,
-                         fallback=lambda idx: _closest_faces(scene, grid, idx))
+    return distance.band(grid.origin, grid.h, grid.shape, band, r + 2 * grid.h)
+
+
+def _ramp_distances(distance, grid: Grid, where: np.ndarray, reach: float) -> np.ndarray:
+    """Exact distances to the surface at the voxels with flat indices ``where``, or ``reach``
+    where it is farther (:meth:`closest.MeshDistance.nearest`): the ramp is flat beyond."""
+    ijk = np.column_stack(np.unravel_index(where, grid.shape))
+    return distance.nearest(grid.origin + grid.h * ijk, reach)
 
 
 def signed_distance(near: tuple[np.ndarray, np.ndarray], inside: np.ndarray, *, r: float, band: float) -> np.ndarray:
@@ -448,14 +439,12 @@ def signed_distance(near: tuple[np.ndarray, np.ndarray], inside: np.ndarray, *, 
     return out.reshape(inside.shape)
 
 
-def squared_distance(distance, scene, grid: Grid, *, r: float, band: float, near=None) -> np.ndarray:
+def squared_distance(distance, grid: Grid, *, r: float, band: float, near=None) -> np.ndarray:
     """Squared distance to the surface within ``r``, rolled off smoothly to a constant at ``band``.
 
     Parameters
     ----------
     distance : :class:`closest.MeshDistance` of the surface
-    scene : ray-casting scene of the same surface (:func:`geometry.make_scene`), for the few
-        voxels where closest-triangle propagation may stop short (:meth:`closest.MeshDistance.band`)
     grid : Grid
     r : radius within which the distances are exact; band : where the roll-off ends
     near : the result of :func:`distance_band` for these arguments, if already computed
@@ -476,7 +465,7 @@ def squared_distance(distance, scene, grid: Grid, *, r: float, band: float, near
     triangle: rarely, near medial surfaces, a little too long).
     """
     far = float(saturated_square(np.array(band), r, band))
-    where, dist2 = distance_band(distance, scene, grid, r=r, band=band) if near is None else near
+    where, dist2 = distance_band(distance, grid, r=r, band=band) if near is None else near
     out = np.zeros(grid.size, np.float32)
     out[where] = saturated_square(np.sqrt(dist2), r, band) - far
     return out.reshape(grid.shape)

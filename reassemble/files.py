@@ -312,19 +312,22 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     _atomic_write(Path(path), (dumps_json(obj) + "\n").encode())
 
 
-def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
-    """Write a compressed ``.npz`` atomically (byte-identical for identical arrays)."""
+def write_npz(path: str | os.PathLike, *, compress: bool = True, **arrays: np.ndarray) -> None:
+    """Write an ``.npz`` atomically (byte-identical for identical arrays), compressed unless
+    ``compress`` is False: deflate takes 4 s for the 140 MB of a 164k-vertex ``describe``
+    and saves 16 % of it (float64 noise compresses little)."""
     import io
     import zipfile
 
+    method = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
     buf = io.BytesIO()
     # np.savez stamps the current time into the zip; a fixed date keeps output reproducible.
-    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+    with zipfile.ZipFile(buf, "w", compression=method) as zf:
         for name, arr in arrays.items():
             b = io.BytesIO()
             np.save(b, np.ascontiguousarray(arr), allow_pickle=False)
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_DEFLATED
+            info.compress_type = method
             zf.writestr(info, b.getvalue())
     _atomic_write(Path(path), buf.getvalue())
 

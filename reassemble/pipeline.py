@@ -373,7 +373,7 @@ def describe_to_file(
                   H=d.H, H_rob=d.H_rob, K2=d.K2, SA=d.SA, D=d.D, SD2=d.SD2, normal_area=d.normal_area)
     if d.K2_cov is not None:
         arrays.update(K2_cov=d.K2_cov, k1=d.k1, k2=d.k2, dir1=d.dir1, normal=d.normal)
-    write_npz(out, **arrays)
+    write_npz(out, compress=False, **arrays)
     return {"vertices": len(d.points), "radii": d.radii.tolist(), "diagonal": diag, "timings": d.timings}
 
 

@@ -153,6 +153,20 @@ class Repair:
         return "; ".join(parts)
 
 
+def _row_key(rows: np.ndarray) -> np.ndarray:
+    """One key per row of non-negative ints (k, c) that orders as the rows do (lexicographic):
+    an int64 where the values fit, so a 1-D unique does what ``np.unique(rows, axis=0)``
+    does ~10x faster; else a structured view of the rows."""
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    n = int(rows.max(initial=0)) + 1
+    if n ** rows.shape[1] < 2**63:
+        key = rows[:, 0].copy()
+        for c in range(1, rows.shape[1]):
+            key = key * n + rows[:, c]
+        return key
+    return rows.view([(f"c{c}", np.int64) for c in range(rows.shape[1])]).ravel()
+
+
 def _drop_duplicates(faces: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Faces kept (mask), same-orientation copies dropped, opposite pairs dropped.
 
@@ -164,7 +178,7 @@ def _drop_duplicates(faces: np.ndarray) -> tuple[np.ndarray, int, int]:
     i0 = np.argmin(faces, axis=1)
     nxt = faces[np.arange(len(faces)), (i0 + 1) % 3]
     sign = np.where(nxt == key[:, 1], 1, -1)
-    _, first, inverse, counts = np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)
+    _, first, inverse, counts = np.unique(_row_key(key), return_index=True, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     if np.all(counts == 1):
         return np.ones(len(faces), bool), 0, 0
@@ -210,7 +224,7 @@ def _orient(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.nda
     # closed patches (every edge of two of its own faces): outward by the signed volume
     directed = oriented[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     key = np.sort(directed, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    _, inv, counts = np.unique(_row_key(key), return_inverse=True, return_counts=True)
     edge_patch = np.repeat(patch, 3)
     open_edge = counts[inv.ravel()] != 2
     is_open = np.bincount(edge_patch, open_edge, n_patch) > 0

@@ -66,21 +66,27 @@ def _around(q, nx, ny, nz, cells, offset2):
 
 
 @njit(cache=True, parallel=True)
-def _suspects(where, T, tri, dist2, origin, h, nx, ny, nz, pos, exact2, spread):
-    """Voxels within the exact zone whose closest point moves more than ``spread`` times as
-    far as the voxel does, to some neighbour's: where descents may stop at a local minimum."""
-    b = len(where)
-    foot = np.empty((b, 3))
-    for s in prange(b):
+def _feet(where, sel, T, tri, origin, h, ny, nz, foot):
+    """``foot[s]``: the point of triangle ``tri[s]`` closest to voxel ``where[s]``, for s in ``sel``."""
+    for u in prange(len(sel)):
+        s = sel[u]
         q = where[s]
         k = q % nz
         j = (q // nz) % ny
         i = q // (ny * nz)
         foot[s, 0], foot[s, 1], foot[s, 2] = tri_closest(origin[0] + h * i, origin[1] + h * j,
                                                           origin[2] + h * k, T, tri[s])
-    flag = np.zeros(b, np.bool_)
+
+
+@njit(cache=True, parallel=True)
+def _jumps(where, sel, foot, dist2, h, nx, ny, nz, pos, exact2, spread):
+    """Of the voxels ``sel`` (positions in ``where``): those within the exact zone whose
+    closest point moves more than ``spread`` times as far as the voxel does, to some
+    neighbour's: where descents may stop at a local minimum. (len(sel),) bool."""
+    flag = np.zeros(len(sel), np.bool_)
     s2 = spread * spread
-    for s in prange(b):
+    for u in prange(len(sel)):
+        s = sel[u]
         if dist2[s] > exact2:
             continue
         cells, offset2 = np.empty(27, np.int64), np.empty(27, np.int64)
@@ -92,15 +98,15 @@ def _suspects(where, T, tri, dist2, origin, h, nx, ny, nz, pos, exact2, spread):
             ey = foot[o, 1] - foot[s, 1]
             ez = foot[o, 2] - foot[s, 2]
             if ex * ex + ey * ey + ez * ez > s2 * h * h * offset2[t]:
-                flag[s] = True
+                flag[u] = True
+                break
     return flag
 
 
 @njit(cache=True, parallel=True)
 def _relax(where, sel, T, nptr, nidx, tri, dist2, origin, h, nx, ny, nz, pos, new_tri, new_dist2):
     """For the voxels ``sel`` (positions in ``where``): the best of every neighbour's closest
-    triangle, then the descent; written to new_tri, new_dist2. Returns how many improved."""
-    changed = 0
+    triangle, then the descent; written to new_tri, new_dist2."""
     for u in prange(len(sel)):
         s = sel[u]
         q = where[s]
@@ -117,10 +123,8 @@ def _relax(where, sel, T, nptr, nidx, tri, dist2, origin, h, nx, ny, nz, pos, ne
                 bt, best = _closer(px, py, pz, T, tri[o], bt, best)
         if bt != tri[s]:
             bt, best = _descend(px, py, pz, T, nptr, nidx, bt, best)
-            changed += 1
         new_tri[s] = bt
         new_dist2[s] = best
-    return changed
 
 
 @njit(cache=True)
@@ -422,16 +426,28 @@ class MeshDistance:
                                   (float(exact) + 2.0 * h) ** 2)
         pos = np.full(nx * ny * nz, -1, np.int64)
         pos[where] = np.arange(len(where))
-        flag = _suspects(where, self.T, tri, dist2, origin, h, nx, ny, nz, pos, exact2, SPREAD)
+        every = np.arange(len(where))
+        foot = np.empty((len(where), 3))
+        _feet(where, every, self.T, tri, origin, h, ny, nz, foot)
+        flag = _jumps(where, every, foot, dist2, h, nx, ny, nz, pos, exact2, SPREAD)
         sel = _dilate(np.flatnonzero(flag), where, nx, ny, nz, pos)
+        # a voxel none of whose neighbours changed keeps its triangle in the next round: each
+        # round relaxes the voxels of sel around the last round's changes
+        active, moved = sel, []
         for _ in range(RELAX_ROUNDS):
             new_tri, new_dist2 = tri.copy(), dist2.copy()
-            changed = _relax(where, sel, self.T, nptr, nidx, tri, dist2, origin, h, nx, ny, nz, pos,
-                             new_tri, new_dist2)
+            _relax(where, active, self.T, nptr, nidx, tri, dist2, origin, h, nx, ny, nz, pos, new_tri, new_dist2)
+            changed = active[new_tri[active] != tri[active]]
             tri, dist2 = new_tri, new_dist2
-            if changed == 0:
+            if len(changed) == 0:
                 break
-        flag = _suspects(where, self.T, tri, dist2, origin, h, nx, ny, nz, pos, exact2, SPREAD)
+            moved.append(changed)
+            active = np.intersect1d(_dilate(changed, where, nx, ny, nz, pos), sel, assume_unique=True)
+        if moved:  # the flags can change only where a closest point moved, and beside it
+            moved = np.unique(np.concatenate(moved))
+            _feet(where, moved, self.T, tri, origin, h, ny, nz, foot)
+            near = _dilate(moved, where, nx, ny, nz, pos)
+            flag[near] = _jumps(where, near, foot, dist2, h, nx, ny, nz, pos, exact2, SPREAD)
         if flag.any():  # the tree's query, bounded by the propagated distance: exact
             asked = where[flag]
             ijk = np.column_stack(np.unravel_index(asked, (nx, ny, nz)))

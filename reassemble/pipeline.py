@@ -26,7 +26,7 @@ from .outputs import pairs_json, run_report, write_match_folder, write_run_folde
 from .pairs import PairMemo, match_pairs, match_set, registration_params
 from .prepare import DescribedSet, PreparedFragment, describe_fragments, prepare_fragments, reference_size, thin_walled
 from .puzzle import PuzzleFiles, break_to_folder, evaluate_files, read_puzzle
-from .retrieval import first_pairs, more_pairs, partner_votes
+from .retrieval import candidates_only, first_pairs, more_pairs, partner_votes
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +154,7 @@ def _segmentations(config: Config, n: int) -> tuple[Config, list[Config]]:
     first, out = config, []
     if seg.mates is None:
         with_mates = dataclasses.replace(config, segment=dataclasses.replace(seg, mates=True))
-        if _candidates_only(config, n):
+        if candidates_only(config.retrieval, n):
             first = with_mates
             out.append(dataclasses.replace(config, segment=dataclasses.replace(seg, mates=False)))
         else:
@@ -162,11 +162,6 @@ def _segmentations(config: Config, n: int) -> tuple[Config, list[Config]]:
     if seg.fallback not in (None, seg.method):
         out.append(dataclasses.replace(config, segment=dataclasses.replace(seg, method=seg.fallback)))
     return first, out
-
-
-def _candidates_only(config: Config, n: int) -> bool:
-    """Whether a set of ``n`` fragments registers candidate pairs only (:mod:`retrieval`)."""
-    return config.retrieval.min_fragments is not None and n >= config.retrieval.min_fragments
 
 
 def _label(config: Config) -> str:
@@ -200,7 +195,7 @@ def _match(described: DescribedSet, config: Config, *, jobs: int, scheduler: str
         return None
     registration = registration_params(frags, size=size, params=config.registration)
     votes = candidates = None
-    if _candidates_only(config, len(frags)):
+    if candidates_only(config.retrieval, len(frags)):
         votes = partner_votes([f.surface for f in frags], neighbours=config.retrieval.neighbours)
         candidates = first_pairs(votes, partners=config.retrieval.partners)
         log.info("%d fragments: registering %d candidate pairs of %d", len(frags), len(candidates),

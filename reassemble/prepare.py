@@ -20,6 +20,8 @@ from .errors import ReassembleError
 from .features import empty_surface, fracture_surface
 from .geometry import denoise, face_areas, taubin_smooth, vertex_noise
 from .mates import relabel_planar_mates
+from .retrieval import candidates_only
+from .surface_mates import relabel_surface_mates
 from .parallel import pool_map
 from .registration import with_noise
 from .segmentation import Segmentation, segment
@@ -206,7 +208,9 @@ def segment_set(described: DescribedSet, thickness: dict[int, np.ndarray], *, co
 def _with_mates(described: DescribedSet, segs: list, good: list[int], *, config: Config, seed: int, jobs: int = 1,
                 scheduler: str | None = None) -> list:
     """``segs`` with the planar mates of labelled planar break faces labelled fracture
-    (:func:`mates.relabel_planar_mates`), at the contact tolerance the registration will use."""
+    (:func:`mates.relabel_planar_mates`), at the contact tolerance the registration will use,
+    and, in a set that registers every pair, the smooth regions with a mate on another
+    fragment whatever their labels (:func:`surface_mates.relabel_surface_mates`)."""
     reg = with_noise(config.registration, noise=float(np.median([described.noise[k] for k in good])),
                      size=described.size)
     found = [segs[k] for k in good]
@@ -215,10 +219,21 @@ def _with_mates(described: DescribedSet, segs: list, good: list[int], *, config:
         min_area=reg.plane_area * float(np.median([s.fracture_area for s in found])),
         min_overlap=config.segment.mate_overlap, rng=np.random.default_rng(seed), jobs=jobs, scheduler=scheduler)
     log.info("planar mates: %d fragment(s) relabelled", len(changed))
+    if not candidates_only(config.retrieval, len(described.names)):  # every pair of regions is compared
+        relabelled, changed = relabel_surface_mates(
+            [(described.matched[k], described.meshes[k][1]) for k in good], relabelled, tol=reg.tolerance * described.size,
+            min_area=SURFACE_MATE_AREA * float(np.median([s.area for s in relabelled])),
+            min_overlap=config.segment.mate_overlap, crease=config.segment.crease_angle,
+            rng=np.random.default_rng(seed))
+        log.info("surface mates: %d fragment(s) relabelled", len(changed))
     out = list(segs)
     for k, s in zip(good, relabelled):
         out[k] = s
     return out
+
+
+SURFACE_MATE_AREA = 0.02  # smooth regions under this share of the median fragment's area are not compared
+
 
 
 def fracture_features(described: DescribedSet, segs: list, thickness: dict[int, np.ndarray], *, shell: bool,

@@ -115,6 +115,11 @@ def first_pairs(votes: np.ndarray, *, partners: int) -> list[tuple[int, int]]:
     return sorted(keep)
 
 
+def candidates_only(params: RetrievalParams, n: int) -> bool:
+    """Whether a set of ``n`` fragments registers candidate pairs only (``params.min_fragments``)."""
+    return params.min_fragments is not None and n >= params.min_fragments
+
+
 def more_pairs(votes: np.ndarray, fragments, registered, *, count: int,
                limit: int | None = None) -> list[tuple[int, int]]:
     """For each of ``fragments``, its next ``count`` partners by votes whose pair is not in
@@ -138,4 +143,4 @@ def more_pairs(votes: np.ndarray, fragments, registered, *, count: int,
     return sorted(new)
 
 
-__all__ = ["RetrievalParams", "first_pairs", "more_pairs", "partner_votes", "ranked_partners"]
+__all__ = ["RetrievalParams", "candidates_only", "first_pairs", "more_pairs", "partner_votes", "ranked_partners"]

@@ -112,7 +112,7 @@ def test_a_candidate_set_starts_with_planar_mates_and_tries_without():
 
 
 def test_large_sets_register_candidate_pairs_by_default():
-    from reassemble.pipeline import _candidates_only
+    from reassemble.retrieval import candidates_only
 
-    assert not _candidates_only(Config(), 29) and _candidates_only(Config(), 30)
-    assert not _candidates_only(with_setting(Config(), "retrieval.min_fragments=none"), 1000)
+    assert not candidates_only(Config().retrieval, 29) and candidates_only(Config().retrieval, 30)
+    assert not candidates_only(with_setting(Config(), "retrieval.min_fragments=none").retrieval, 1000)

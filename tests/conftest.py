@@ -126,6 +126,16 @@ def prepared(puzzle):
     return prepare_fragments(meshes, seed=0)
 
 
+def labelled(vertices, faces, fracture):
+    """A Segmentation with the given (f,) fracture labels, one patch, one region (for the mates' tests)."""
+    from reassemble.geometry import face_areas
+    from reassemble.segmentation import Segmentation
+
+    area = face_areas(vertices, faces)
+    return Segmentation(fracture.copy(), fracture.astype(float), np.zeros(len(faces), int), np.where(fracture, 0, -1),
+                        float(area[fracture].sum()), float(area.sum()))
+
+
 def tree_digest(root):
     """{relative path: bytes} of every file below root."""
     return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}

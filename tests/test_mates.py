@@ -5,7 +5,8 @@ import pytest
 
 from reassemble.geometry import face_areas, face_normals, random_rotation
 from reassemble.mates import relabel_planar_mates
-from reassemble.segmentation import Segmentation
+
+from .conftest import labelled
 
 
 def _halves(rng):
@@ -26,12 +27,6 @@ def _halves(rng):
     return out
 
 
-def _segmentation(v, f, fracture):
-    area = face_areas(v, f)
-    return Segmentation(fracture.copy(), fracture.astype(float), np.zeros(len(f), int), np.where(fracture, 0, -1),
-                        float(area[fracture].sum()), float(area.sum()))
-
-
 @pytest.fixture(scope="module")
 def halves():
     return _halves(np.random.default_rng(3))
@@ -40,7 +35,7 @@ def halves():
 def test_the_missed_side_of_a_planar_break_is_labelled(halves):
     (va, fa, cut_a), (vb, fb, cut_b) = halves
     assert cut_a.any() and cut_b.any()
-    segs = [_segmentation(va, fa, cut_a), _segmentation(vb, fb, np.zeros(len(fb), bool))]  # b's face missed
+    segs = [labelled(va, fa, cut_a), labelled(vb, fb, np.zeros(len(fb), bool))]  # b's face missed
     given = [s.fracture.copy() for s in segs]
     out, changed = relabel_planar_mates([(va, fa), (vb, fb)], segs, tol=0.005, min_area=0.1, min_overlap=0.9,
                                         rng=np.random.default_rng(0))
@@ -55,7 +50,7 @@ def test_the_missed_side_of_a_planar_break_is_labelled(halves):
 
 def test_a_set_whose_breaks_are_labelled_is_left_as_it_is(halves):
     (va, fa, cut_a), (vb, fb, cut_b) = halves
-    segs = [_segmentation(va, fa, cut_a), _segmentation(vb, fb, cut_b)]
+    segs = [labelled(va, fa, cut_a), labelled(vb, fb, cut_b)]
     out, changed = relabel_planar_mates([(va, fa), (vb, fb)], segs, tol=0.005, min_area=0.1, min_overlap=0.9,
                                         rng=np.random.default_rng(0))
     assert changed == [] and all(o is s for o, s in zip(out, segs))
@@ -70,7 +65,7 @@ def test_a_plane_that_does_not_match_the_outline_is_not_a_mate(halves):
     # the break: a disc of radius 0.97 less a dent; the triangle's circumradius 1.45
     box = m3d.Manifold.cylinder(0.5, 1.45, 1.45, 3).to_mesh()
     vb, fb = np.asarray(box.vert_properties)[:, :3].astype(float), np.asarray(box.tri_verts).astype(np.int64)
-    segs = [_segmentation(va, fa, cut_a), _segmentation(vb, fb, np.zeros(len(fb), bool))]
+    segs = [labelled(va, fa, cut_a), labelled(vb, fb, np.zeros(len(fb), bool))]
     _, changed = relabel_planar_mates([(va, fa), (vb, fb)], segs, tol=0.005, min_area=0.1, min_overlap=0.9,
                                       rng=np.random.default_rng(0))
     assert changed == []
@@ -151,8 +146,8 @@ def test_mates_compared_in_processes_are_those_compared_here(halves, monkeypatch
 
     (va, fa, cut_a), (vb, fb, cut_b) = halves
     meshes = [(va, fa), (vb, fb), (va + 5.0, fa)]
-    segs = [_segmentation(va, fa, cut_a), _segmentation(vb, fb, np.zeros(len(fb), bool)),
-            _segmentation(va + 5.0, fa, cut_a)]
+    segs = [labelled(va, fa, cut_a), labelled(vb, fb, np.zeros(len(fb), bool)),
+            labelled(va + 5.0, fa, cut_a)]
     kw = dict(tol=0.005, min_area=0.1, min_overlap=0.9)
     here, changed = relabel_planar_mates(meshes, segs, rng=np.random.default_rng(0), **kw)
     monkeypatch.setattr(mates, "_PARALLEL_FROM", 2)

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from reassemble.geometry import face_areas, face_normals, random_rotation
-from reassemble.segmentation import Segmentation
 from reassemble.surface_mates import relabel_surface_mates, smooth_regions
+
+from .conftest import labelled
 
 CUT_CENTRE, CUT_RADIUS = np.array([0.2, 0.1, 3.1]), 3.0  # a gently curved cut: a sphere of radius 3
 
@@ -31,12 +32,6 @@ def _halves(rng):
     return out
 
 
-def _segmentation(v, f, fracture):
-    area = face_areas(v, f)
-    return Segmentation(fracture.copy(), fracture.astype(float), np.zeros(len(f), int), np.where(fracture, 0, -1),
-                        float(area[fracture].sum()), float(area.sum()))
-
-
 @pytest.fixture(scope="module")
 def halves():
     return _halves(np.random.default_rng(5))
@@ -53,7 +48,7 @@ def test_the_cut_is_one_smooth_region(halves):
 def test_a_smooth_break_missed_on_both_sides_is_labelled(halves):
     (va, fa, cut_a), (vb, fb, cut_b) = halves
     assert cut_a.any() and cut_b.any()
-    segs = [_segmentation(va, fa, np.zeros(len(fa), bool)), _segmentation(vb, fb, np.zeros(len(fb), bool))]
+    segs = [labelled(va, fa, np.zeros(len(fa), bool)), labelled(vb, fb, np.zeros(len(fb), bool))]
     out, changed = relabel_surface_mates([(va, fa), (vb, fb)], segs, tol=0.006, min_area=0.05, min_overlap=0.9,
                                          rng=np.random.default_rng(0))
     assert changed == [0, 1]
@@ -71,7 +66,7 @@ def test_pieces_of_different_objects_have_no_mates(halves):
     (va, fa, _), _ = halves
     mesh = m3d.Manifold.sphere(0.8, 64).to_mesh()  # a whole sphere: its cap mates nothing
     vb, fb = np.asarray(mesh.vert_properties)[:, :3].astype(float), np.asarray(mesh.tri_verts).astype(np.int64)
-    segs = [_segmentation(va, fa, np.zeros(len(fa), bool)), _segmentation(vb, fb, np.zeros(len(fb), bool))]
+    segs = [labelled(va, fa, np.zeros(len(fa), bool)), labelled(vb, fb, np.zeros(len(fb), bool))]
     out, changed = relabel_surface_mates([(va, fa), (vb, fb)], segs, tol=0.006, min_area=0.05, min_overlap=0.9,
                                          rng=np.random.default_rng(0))
     assert changed == [] and out[0] is segs[0] and out[1] is segs[1]

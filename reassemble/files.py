@@ -314,8 +314,7 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
 
 def write_npz(path: str | os.PathLike, *, compress: bool = True, **arrays: np.ndarray) -> None:
     """Write an ``.npz`` atomically (byte-identical for identical arrays), compressed unless
-    ``compress`` is False: deflate takes 4 s for the 140 MB of a 164k-vertex ``describe``
-    and saves 16 % of it (float64 noise compresses little)."""
+    ``compress`` is False (large float64 arrays gain little from deflate and cost seconds)."""
     import io
     import zipfile
 

@@ -20,12 +20,12 @@ from .errors import ReassembleError
 from .features import empty_surface, fracture_surface
 from .geometry import denoise, face_areas, taubin_smooth, vertex_noise
 from .mates import relabel_planar_mates
-from .retrieval import candidates_only
-from .surface_mates import relabel_surface_mates
 from .parallel import pool_map
 from .registration import with_noise
+from .retrieval import candidates_only
 from .segmentation import Segmentation, segment
 from .shells import is_thin_shell, strip_frames, strip_segmentation, wall_thickness
+from .surface_mates import relabel_surface_mates
 
 log = logging.getLogger(__name__)
 
@@ -221,8 +221,8 @@ def _with_mates(described: DescribedSet, segs: list, good: list[int], *, config:
     log.info("planar mates: %d fragment(s) relabelled", len(changed))
     if not candidates_only(config.retrieval, len(described.names)):  # every pair of regions is compared
         relabelled, changed = relabel_surface_mates(
-            [(described.matched[k], described.meshes[k][1]) for k in good], relabelled, tol=reg.tolerance * described.size,
-            min_area=SURFACE_MATE_AREA * float(np.median([s.area for s in relabelled])),
+            [(described.matched[k], described.meshes[k][1]) for k in good], relabelled,
+            tol=reg.tolerance * described.size, min_area=SURFACE_MATE_AREA * float(np.median([s.area for s in relabelled])),
             min_overlap=config.segment.mate_overlap, crease=config.segment.crease_angle,
             rng=np.random.default_rng(seed))
         log.info("surface mates: %d fragment(s) relabelled", len(changed))
@@ -233,7 +233,6 @@ def _with_mates(described: DescribedSet, segs: list, good: list[int], *, config:
 
 
 SURFACE_MATE_AREA = 0.02  # smooth regions under this share of the median fragment's area are not compared
-
 
 
 def fracture_features(described: DescribedSet, segs: list, thickness: dict[int, np.ndarray], *, shell: bool,

@@ -17,7 +17,16 @@ import dataclasses
 
 import numpy as np
 
-from .geometry import connected_components, face_adjacency, face_areas, face_normals, sample_surface
+from .geometry import (
+    connected_components,
+    face_adjacency,
+    face_areas,
+    face_normals,
+    rotation_from_vector,
+    sample_surface,
+)
+from .mates import _similar
+from .registration import opposed_neighbours
 from .segmentation import Segmentation, fracture_regions
 
 
@@ -89,17 +98,10 @@ def _region(fragment: int, vertices: np.ndarray, faces: np.ndarray, idx: np.ndar
 
 def _point_to_plane(src: np.ndarray, dst: np.ndarray, dst_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(R, t): the small rigid motion minimizing sum(((R src + t - dst) . n)^2), linearized."""
-    c = np.cross(src, dst_n)
-    A = np.hstack([c, dst_n])
+    A = np.hstack([np.cross(src, dst_n), dst_n])
     b = np.einsum("ij,ij->i", dst - src, dst_n)
     x = np.linalg.lstsq(A.T @ A + 1e-12 * np.eye(6), A.T @ b, rcond=None)[0]
-    w, t = x[:3], x[3:]
-    angle = np.linalg.norm(w)
-    if angle < 1e-12:
-        return np.eye(3), t
-    k = w / angle
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K, t
+    return rotation_from_vector(x[:3]), x[3:]
 
 
 _FLIP = np.diag([1.0, -1.0, -1.0])  # the mate's frame seen from the other side (a rotation)
@@ -138,28 +140,17 @@ def _overlap(a: Region, b: Region, tree_a, tree_b, *, tol: float, spacing: float
 
 def _covered(a: Region, b: Region, R: np.ndarray, t: np.ndarray, tree_a, tree_b, *, tol: float,
              spacing: float) -> float:
-    """The smaller of the shares of a's samples covered by b placed by (R, t), and of b's by a."""
-    moved, moved_n = b.points @ R.T + t, b.normals @ R.T
-    d, j = tree_a.query(moved, distance_upper_bound=2.0 * spacing)
-    ok = np.isfinite(d)
-    jj = np.where(ok, j, 0)
-    on = ok & (np.abs(np.einsum("ij,ij->i", moved - a.points[jj], a.normals[jj])) < tol) \
-        & (np.einsum("ij,ij->i", moved_n, a.normals[jj]) < -0.5)
-    share_b = float(np.mean(on))
-    back = (a.points - t) @ R  # a in b's frame
-    back_n = a.normals @ R
-    d, j = tree_b.query(back, distance_upper_bound=2.0 * spacing)
-    ok = np.isfinite(d)
-    jj = np.where(ok, j, 0)
-    on = ok & (np.abs(np.einsum("ij,ij->i", back - b.points[jj], b.normals[jj])) < tol) \
-        & (np.einsum("ij,ij->i", back_n, b.normals[jj]) < -0.5)
-    return min(share_b, float(np.mean(on)))
+    """The smaller of the shares of a's samples covered by b placed by (R, t), and of b's by a:
+    a sample is covered where the other's nearest sample lies within ``2 spacing``, faces it
+    (:func:`registration.opposed_neighbours`) and has it on its plane within ``tol``."""
 
+    def share(points, normals, onto: Region, tree) -> float:
+        ok, j = opposed_neighbours(tree, points, normals, onto.normals, reach=2.0 * spacing, cos_tol=0.5)
+        ok[ok] = np.abs(np.einsum("ij,ij->i", points[ok] - onto.points[j[ok]], onto.normals[j[ok]])) < tol
+        return float(np.mean(ok))
 
-def _similar(a: Region, b: Region, ratio: float) -> bool:
-    """Mates have the same area and in-plane spreads: within ``ratio`` (before any alignment)."""
-    return (max(a.area, b.area) <= ratio * min(a.area, b.area)
-            and bool(np.all(np.maximum(a.spread, b.spread) <= ratio * np.minimum(a.spread, b.spread) + 1e-300)))
+    share_b = share(b.points @ R.T + t, b.normals @ R.T, a, tree_a)
+    return min(share_b, share((a.points - t) @ R, a.normals @ R, b, tree_b))  # a in b's frame
 
 
 def relabel_surface_mates(

@@ -141,19 +141,6 @@ def _dilate(sel, where, nx, ny, nz, pos):
 
 
 @njit(cache=True)
-def _dist2_to(where, tri, T, origin, h, ny, nz):
-    """(k,) squared distance from each voxel of ``where`` (flat indices) to its triangle ``tri``."""
-    out = np.empty(len(where))
-    for s in range(len(where)):
-        q = where[s]
-        k = q % nz
-        j = (q // nz) % ny
-        i = q // (ny * nz)
-        out[s] = tri_dist2(origin[0] + h * i, origin[1] + h * j, origin[2] + h * k, T, tri[s])
-    return out
-
-
-@njit(cache=True)
 def _face_neighbours(F, n_vertices):
     """CSR (ptr (f + 1,), idx) of the faces sharing a vertex with each face, itself excluded."""
     nf = F.shape[0]

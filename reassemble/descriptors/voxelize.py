@@ -1,7 +1,8 @@
 """Grids for the integral invariants: anti-aliased occupancy and narrow-band squared distance.
 
-Occupancy is a linear ramp of the signed distance across the surface (exact distances
-from Open3D in a thin band, the sign from ray parity along grid columns). Measured on a
+Occupancy is a linear ramp of the signed distance across the surface (exact distances in
+a thin band from :class:`closest.MeshDistance`'s box hierarchy, the sign from ray parity
+along grid columns). Measured on a
 sphere, it is 2-4x more accurate than exact partial coverage along axis rays, whose
 smoothing depends on the surface orientation.
 """

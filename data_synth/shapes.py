@@ -154,6 +154,25 @@ def bowl_mesh(*, wall: float = 0.04, segments: int = 96, rows: int = 40) -> tupl
                    wall=wall, segments=segments, rows=rows)
 
 
+def tile_mesh(*, thickness: float = 0.05, segments: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """A flat tile (1 by 0.7, ``thickness`` thick) with rounded corners, a raised border
+    frame 0.05 wide and 0.02 high on top, and two nail holes: a flat sherd shape (tiles,
+    plaques, tablets), meshed as CAD is, with a few large triangles per face."""
+    import manifold3d as m3
+
+    slab = m3.Manifold.cube([1.0, 0.7, thickness], center=True)
+    corners = [m3.Manifold.cylinder(thickness + 0.01, 0.06, circular_segments=segments)
+               .translate([sx * 0.44, sy * 0.29, -(thickness + 0.01) / 2]) for sx in (-1, 1) for sy in (-1, 1)]
+    slab = slab ^ m3.Manifold.batch_hull(corners)
+    frame = m3.Manifold.cube([0.96, 0.66, 0.02], center=True) - m3.Manifold.cube([0.86, 0.56, 0.03], center=True)
+    tile = slab + frame.translate([0.0, 0.0, thickness / 2 + 0.009])
+    for x in (-0.3, 0.3):
+        tile = tile - m3.Manifold.cylinder(4 * thickness, 0.02, circular_segments=segments // 4 * 3).translate(
+            [x, 0.2, -2 * thickness])
+    mesh = tile.to_mesh()
+    return np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64)
+
+
 def _vessel(z_ctrl, r_ctrl, *, wall: float, segments: int, rows: int) -> tuple[np.ndarray, np.ndarray]:
     """Closed solid of revolution: the outer profile r(z) through the control points, the
     inner one ``wall`` in from it, a flat base ``wall`` thick, open at the top."""

@@ -258,7 +258,7 @@ def fracture_features(described: DescribedSet, segs: list, thickness: dict[int, 
             surf = fracture_surface(v, f, s, d, spacing=spacing, n_samples=params.samples,
                                     signature_radii=n_signature, rng=rng)
             if shell and len(surf.keypoints):
-                n, t = strip_frames(v, f, thickness[k], surf.keypoints, surf.keypoint_normals)
+                n, t = strip_frames(v, f, thickness[k], surf.keypoints, surf.keypoint_normals, rng=rng)
                 # no rims: a strip's two rims are its wall edges, a wall thickness apart (a
                 # few tolerances), and its frames already fix where along it a mate lies
                 surf = dataclasses.replace(surf, keypoint_normals=n, keypoint_tangents=t, rim=None,

@@ -21,9 +21,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import face_areas, face_normals, make_scene
+from .geometry import face_areas, face_normals, make_scene, sample_surface
 
 SHELL_THICKNESS = 0.08  # a set is thin-walled when its median wall is under this fraction of a fragment's diagonal
+MAX_WALL_SAMPLES = 200_000  # points spread over a sherd's walls for their local axis (strip_frames)
 SHELL_WALL_SHARE = 0.6  # ... and walls (faces with an opposite face within 2 thicknesses) are most of the surface
 
 
@@ -85,7 +86,8 @@ def strip_segmentation(vertices: np.ndarray, faces: np.ndarray, thickness: np.nd
 
 
 def strip_frames(
-    vertices: np.ndarray, faces: np.ndarray, thickness: np.ndarray, keypoints: np.ndarray, normals: np.ndarray
+    vertices: np.ndarray, faces: np.ndarray, thickness: np.ndarray, keypoints: np.ndarray, normals: np.ndarray, *,
+    rng: np.random.Generator,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Strip normal and break tangent at each strip keypoint.
 
@@ -104,21 +106,29 @@ def strip_frames(
         thicknesses, across the wall normal (sign arbitrary)
     """
     wall, median = walls(thickness)
-    centres = vertices[faces].mean(axis=1)
     fn, area = face_normals(vertices, faces), face_areas(vertices, faces)
     W = np.flatnonzero(wall)
     if len(W) == 0:  # no wall to lean on: the rough normals, and any tangent across them
         n = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
         t = np.cross(n, np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
         return n, t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
-    tree = cKDTree(centres[W])
+    # the wall near a keypoint from points spread over the wall by area, not from face
+    # centres: a CAD part's or a tile's wall is a few large triangles whose centres lie far
+    # from the break, where the only "wall" centres near it are small faces of the break itself
+    count = int(np.clip(area[W].sum() / (0.5 * median) ** 2, len(W), MAX_WALL_SAMPLES))
+    spots, which = sample_surface(vertices, faces[W], count, rng=rng)
+    which = W[which]
+    tree = cKDTree(spots)
     _, nearest = tree.query(keypoints)
     w = np.empty_like(keypoints)
     for i, hood in enumerate(tree.query_ball_point(keypoints, 1.5 * median)):
-        hood = W[np.asarray(hood, dtype=np.int64)]
-        # the two sides of the wall have opposite normals: align them to the nearest one
-        side = np.sign(fn[hood] @ fn[W[nearest[i]]])
-        w[i] = (side[:, None] * fn[hood] * area[hood, None]).sum(axis=0) if len(hood) else fn[W[nearest[i]]]
+        hood = which[np.asarray(hood, dtype=np.int64)]
+        if len(hood) == 0:
+            w[i] = fn[which[nearest[i]]]
+            continue
+        # the wall's axis, whichever side: the main axis of the normals (aligned to one
+        # side, they cancel where a rib or flange stands on the wall)
+        w[i] = np.linalg.eigh(fn[hood].T @ fn[hood])[1][:, -1]
     w /= np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300)
     t = np.empty_like(keypoints)
     for i, hood in enumerate(cKDTree(keypoints).query_ball_point(keypoints, 2.5 * median)):

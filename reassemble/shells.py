@@ -24,6 +24,7 @@ from scipy.spatial import cKDTree
 from .geometry import face_areas, face_normals, make_scene, sample_surface
 
 SHELL_THICKNESS = 0.08  # a set is thin-walled when its median wall is under this fraction of a fragment's diagonal
+WALL_AXIS_COS = np.cos(np.radians(20.0))  # wall normals within this of a wall's main axis define it
 MAX_WALL_SAMPLES = 200_000  # points spread over a sherd's walls for their local axis (strip_frames)
 SHELL_WALL_SHARE = 0.6  # ... and walls (faces with an opposite face within 2 thicknesses) are most of the surface
 
@@ -128,7 +129,11 @@ def strip_frames(
             continue
         # the wall's axis, whichever side: the main axis of the normals (aligned to one
         # side, they cancel where a rib or flange stands on the wall)
-        w[i] = np.linalg.eigh(fn[hood].T @ fn[hood])[1][:, -1]
+        axis = np.linalg.eigh(fn[hood].T @ fn[hood])[1][:, -1]
+        # again on the normals near that axis: a rough break's own faces, some of them
+        # "wall" by the ray test, tilt it otherwise
+        near = fn[hood][np.abs(fn[hood] @ axis) > WALL_AXIS_COS]
+        w[i] = np.linalg.eigh(near.T @ near)[1][:, -1] if len(near) else axis
     w /= np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300)
     t = np.empty_like(keypoints)
     for i, hood in enumerate(cKDTree(keypoints).query_ball_point(keypoints, 2.5 * median)):

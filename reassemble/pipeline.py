@@ -104,10 +104,20 @@ def reassemble(
         return result
     more = dict(jobs=jobs, scheduler=scheduler, progress=progress, memo=memo, groups=groups)
     _assemble(result, limit=config.retrieval.max_partners, **more)
+    t0, tried = time.perf_counter(), [result]
     if thin_walled(result.fragments):
         _assemble(result, limit=None, **more)
-        return result
-    t0, tried = time.perf_counter(), [result]
+        if config.thin_walls is not None:
+            return result
+        # an automatic verdict: flat sherds (tiles, plates) whose breaks are planar faces
+        # match as solids too, where the strips' frames are no better than their faces;
+        # the arbiter keeps the assembly with more contact, as for every retry
+        log.info("thin-walled by the automatic test: matching the fragments as solids too")
+        first, *retries = [dataclasses.replace(c, thin_walls=False) for c in [first, *retries]]
+        again = _match(described, first, jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)
+        _assemble(again, limit=config.retrieval.max_partners, **more)
+        tried.append(again)
+        result = _better(result, again, config=config)
     for retry in retries:
         # another segmentation can only help a fragment that was described and still not placed
         if not any(not p and f.descriptors is not None for p, f in zip(result.assembly.placed, result.fragments)):
@@ -165,7 +175,7 @@ def _segmentations(config: Config, n: int) -> tuple[Config, list[Config]]:
 
 
 def _label(config: Config) -> str:
-    return config.segment.method + ("+mates" if config.segment.mates else "")
+    return ("sherds" if config.thin_walls else config.segment.method) + ("+mates" if config.segment.mates else "")
 
 
 def _better(first: Result, second: Result, *, config: Config) -> Result:

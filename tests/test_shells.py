@@ -40,6 +40,8 @@ def test_sherds_are_reassembled(bowl, tmp_path):
     report = run_to_folder([bowl / "fragments"], tmp_path / "out", seed=0)
     assert report["summary"]["thin_walled"]
     assert json.loads((tmp_path / "out" / "config.json").read_text())["thin_walls"] is True
+    # found thin-walled by the automatic test, so matched as solids too; the sherds had more contact
+    assert set(report["summary"]["fallback"]["contact"]) == {"sherds", "learned"}
     s = _score(tmp_path / "out", bowl)
     assert s["solved"], s
     assert s["rot_geodesic_rmse_deg"] < 1.0
@@ -124,3 +126,19 @@ def test_strip_frames_lean_on_walls_of_large_triangles(tmp_path, rng):
         n, t = strip_frames(v, f, thickness, keys, rough, rng=rng)
         err = np.degrees(np.arccos(np.clip(np.abs(np.cross(n, t) @ axis), 0.0, 1.0)))
         assert np.median(err) < 1.0 and np.percentile(err, 95) < 5.0, np.percentile(err, [50, 95])
+
+
+@pytest.mark.slow
+def test_flat_sherds_with_planar_breaks_are_matched_as_solids_too(tmp_path):
+    """A flat tile in two by a near-planar cut, with scan noise: found thin-walled, its
+    strips' frames placed the pieces wrongly; matched as solids too, the arbiter keeps the
+    solids' assembly (more contact) and the puzzle is solved."""
+    from data_synth.shapes import tile_mesh
+
+    write_ply(tmp_path / "tile.ply", *tile_mesh())
+    break_to_folder(tmp_path / "tile.ply", tmp_path / "puzzle", params=BreakParams(pieces=2, style="mixed", noise=0.001),
+                    seed=0)
+    report = run_to_folder([tmp_path / "puzzle" / "fragments"], tmp_path / "out", seed=0)
+    assert report["summary"]["fallback"]["contact"].keys() == {"sherds", "learned"}
+    s = _score(tmp_path / "out", tmp_path / "puzzle")
+    assert s["solved"], s

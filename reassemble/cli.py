@@ -434,7 +434,8 @@ def _add_inputs(p) -> None:
             "median fragment's bounding-box diagonal; 'auto': measured from the pairs")
     _option(p, "--thin-walls", "thin_walls", type=_thin_walls, show=_auto,
             help="match as thin-walled sherds, along their break strips: 'auto' (when most fragments are "
-            "walls under 8 %% of their diagonal thick), 'yes' or 'no'")
+            "walls under 8 %% of their diagonal thick; then as solids too, keeping the assembly with more "
+            "contact), 'yes' or 'no'")
     _add_fill_holes(p)
     _add_config(p)
     _option(p, "--split-bodies", "split_bodies", action="store_true", show=None,

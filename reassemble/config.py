@@ -49,7 +49,8 @@ class Config:
         fragment is matched on a Taubin-smoothed copy (all smoothed alike, until the noisiest
         is down to half that); their own vertices stay in every output
     thin_walls : match as thin-walled sherds along their break strips (:mod:`shells`): None
-        when most fragments are (:func:`shells.is_thin_shell`), or always / never
+        when most fragments are (:func:`shells.is_thin_shell`; then as solids too, and the
+        assembly with more contact is kept), or always / never
     fill_holes : close the holes of open scans up to this extent, a fraction of each mesh's
         diagonal (:func:`holes.fill_holes`); None reads an open mesh as it is (the winding
         number bridges its holes)

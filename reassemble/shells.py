@@ -98,11 +98,13 @@ def strip_frames(
     thickness : (f,) :func:`wall_thickness`
     keypoints : (k, 3) points on the strip
     normals : (k, 3) rough outward normals there (they fix the sign of the strip normal)
+    rng : numpy Generator (the points spread over the walls)
 
     Returns
     -------
-    n : (k, 3) unit strip normals: perpendicular to the break tangent and to the wall normal
-        (the area-weighted normal of the wall faces within 1.5 thicknesses, either side)
+    n : (k, 3) unit strip normals: perpendicular to the break tangent and to the wall's axis
+        (the main axis of the normals at points spread over the walls by area within 1.5
+        thicknesses, either side, refitted on those within 20 degrees of it)
     t : (k, 3) unit tangents: the main direction of the strip keypoints within 2.5
         thicknesses, across the wall normal (sign arbitrary)
     """

@@ -106,7 +106,7 @@ def test_strip_frames_lean_on_walls_of_large_triangles(tmp_path, rng):
     """A plate meshed as CAD is (12 triangles) broken in two: near the break the only wall
     face centres are the break's own small faces; the wall axis from points spread over the
     walls is the plate's normal at the strip keypoints (median error under 1 degree, 95 %
-    under 5), and so is n x t (from the face centres: 25 degrees off on a tile's break)."""
+    under 5), and so is n x t (from the wall faces' centres most were tens of degrees off)."""
     import trimesh
 
     from reassemble.geometry import face_areas, face_normals

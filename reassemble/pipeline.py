@@ -106,7 +106,8 @@ def reassemble(
     more = dict(jobs=jobs, scheduler=scheduler, progress=progress, memo=memo, groups=groups)
     _assemble(result, limit=config.retrieval.max_partners, **more)
     t0, tried = time.perf_counter(), [result]
-    if thin_walled(result.fragments):
+    sherds = thin_walled(result.fragments)
+    if sherds:
         _assemble(result, limit=None, **more)
         if config.thin_walls is not None:
             return result
@@ -140,7 +141,8 @@ def reassemble(
         result.timings = {**tried[0].timings, "fallback": time.perf_counter() - t0}
         result.fallback = {"method": _label(result.config), "kept": result is not tried[0],
                            "contact": {_label(r.config): r.fallback_contact for r in tried}}
-    _assemble(result, limit=None, **more)
+    if not (sherds and result is tried[0]):  # the sherds' assembly above already asked every partner
+        _assemble(result, limit=None, **more)
     return result
 
 

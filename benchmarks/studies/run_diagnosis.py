@@ -8,7 +8,7 @@ Per fragment: its sub-assembly in the report and the area-weighted precision, re
 of the run's fracture labels against the generator's (``segmentation_f1`` of the field
 benchmark). Per pair of fragments that touch in the ground truth (largest contact first):
 whether the pair was registered, where the true placement ranks among its candidates
-(within 5 degrees and 2 % of the object's diagonal) with its score, and the best score. A
+(within 5 degrees, and 2 % of the diagonal at the source's centre) with its score, and the best score. A
 true pair with no true candidate and a low recall on either side had no keypoints to meet.
 ``--fragments`` keeps the fragments named and the contacts that involve them.
 """
@@ -27,14 +27,15 @@ ANGLE_DEG = 5.0  # a candidate within this of the true rotation ...
 OFFSET = 0.02  # ... and this fraction of the diagonal of its translation is the true placement
 
 
-def true_rank(candidates: list[dict], T_target_source: np.ndarray, diagonal: float) -> tuple[int | None, float | None]:
-    """Rank and score of the first candidate at the true placement, (None, None) when none is."""
-    from reassemble.geometry import rotation_angle_deg
+def true_rank(candidates: list[dict], T_target_source: np.ndarray, centre: np.ndarray,
+              diagonal: float) -> tuple[int | None, float | None]:
+    """Rank and score of the first candidate at the true placement (errors measured at the
+    source's ``centre``, as the pairwise benchmark does), (None, None) when none is."""
+    from benchmarks.accuracy.pairwise import errors
 
     for i, c in enumerate(candidates):
-        M = np.asarray(c["T_target_source"])
-        if (rotation_angle_deg(M[:3, :3], T_target_source[:3, :3]) < ANGLE_DEG
-                and np.linalg.norm(M[:3, 3] - T_target_source[:3, 3]) < OFFSET * diagonal):
+        rotation, offset = errors(np.asarray(c["T_target_source"]), T_target_source, centre, diagonal)
+        if rotation < ANGLE_DEG and offset < OFFSET:
             return i, float(c["score"])
     return None, None
 
@@ -44,7 +45,8 @@ def study(puzzle: Path, run: Path, *, fragments: list[str] | None = None) -> dic
     from reassemble.inputs import load_fragments
     from reassemble.puzzle import read_puzzle
 
-    gt = json.loads((puzzle / "ground_truth.json").read_text())
+    files = read_puzzle(puzzle / "ground_truth.json")
+    gt = files.ground_truth
     T_world = {n: np.asarray(f["transform"]) for n, f in gt["fragments"].items()}
     diagonal = float(gt["object"]["diagonal"])
     analysis = np.load(run / "analysis.npz", allow_pickle=True)
@@ -53,7 +55,6 @@ def study(puzzle: Path, run: Path, *, fragments: list[str] | None = None) -> dic
     report = json.loads((run / "report.json").read_text())
     group = {n: g for g, members in enumerate(report["groups"]) for n in members}
     meshes, _ = load_fragments([puzzle / "fragments" / f"{n}.ply" for n in keep])
-    files = read_puzzle(puzzle / "ground_truth.json")
     rows = []
     for n in keep:
         s = segmentation_f1({n: meshes[n]}, {n: analysis[f"fracture_{names.index(n)}"]}, files)
@@ -70,7 +71,8 @@ def study(puzzle: Path, run: Path, *, fragments: list[str] | None = None) -> dic
                "best": None}
         if p is not None and p["candidates"]:
             T = np.linalg.inv(T_world[p["target"]]) @ T_world[p["source"]]
-            row["rank"], row["score"] = true_rank(p["candidates"], T, diagonal)
+            centre = files.meshes[p["source"]].vertices.mean(axis=0)
+            row["rank"], row["score"] = true_rank(p["candidates"], T, centre, diagonal)
             row["best"] = float(p["candidates"][0]["score"])
         contacts.append(row)
     return {"puzzle": puzzle.name, "fragments": rows, "contacts": contacts}

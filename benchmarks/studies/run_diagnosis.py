@@ -8,8 +8,9 @@ Per fragment: its sub-assembly in the report and the area-weighted precision, re
 of the run's fracture labels against the generator's (``segmentation_f1`` of the field
 benchmark). Per pair of fragments that touch in the ground truth (largest contact first):
 whether the pair was registered, where the true placement ranks among its candidates
-(within 5 degrees, and 2 % of the diagonal at the source's centre) with its score, and the best score. A
-true pair with no true candidate and a low recall on either side had no keypoints to meet.
+(within 5 degrees, and 2 % of the diagonal at the source's centre) with its score, and the
+best score. A true pair with no true candidate and a low recall on either side had no
+keypoints to meet.
 ``--fragments`` keeps the fragments named and the contacts that involve them.
 """
 

@@ -42,7 +42,10 @@ class AssemblyParams:
         each a share of the smaller break: :func:`registration.contact_score`)
     max_penetration : a merge is rejected when any two fragments it brings together
         interpenetrate by more than this share of the smaller one's surface area
-    refine_iterations : joint point-to-plane iterations per sub-assembly
+    refine_iterations : at most this many joint point-to-plane iterations per level of
+        :func:`refine` (it stops sooner when converged: ``refine_stop``)
+    refine_stop : the refinement stops when no fragment's samples move more than this share
+        of the contact tolerance in an iteration
     group_rounds : rounds of registering whole sub-assemblies against each other
     starts : greedy merging is run from this many first merges (the best proposals of two
         lone fragments, in order) and the outcome with the largest verified total kept
@@ -61,7 +64,8 @@ class AssemblyParams:
     candidates: int = 7
     min_gain: float = 0.06
     max_penetration: float = 0.02
-    refine_iterations: int = 15
+    refine_iterations: int = 100
+    refine_stop: float = 0.01
     group_rounds: int = 3
     starts: int = 4
     verify_samples: int = 1000
@@ -463,7 +467,8 @@ def assemble(
     for g in members.values():
         if len(g) > 1:
             poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
-                              iterations=params.refine_iterations, anchor=int(np.argmax(areas[g])),
+                              iterations=params.refine_iterations, stop=params.refine_stop,
+                              anchor=int(np.argmax(areas[g])),
                               levels=params.refine_levels, n_points=params.refine_samples, gap=gap,
                               rim_reach=params.rim_reach, rim_weight=params.rim_weight)
 
@@ -673,13 +678,27 @@ def _normal_equations(pairs: list[tuple[int, int]], pts: list[np.ndarray], nrm: 
     return AtA, Atb, rows, touching
 
 
+def _largest_motion(x: np.ndarray, col: dict[int, int], T: np.ndarray, centres: np.ndarray,
+                    radii: np.ndarray) -> float:
+    """The farthest any fragment's samples move by the step ``x`` (per free fragment k at
+    ``col[k]``: rotation vector, translation) taken at poses ``T`` (before it): a bound from
+    its bounding sphere (``centres`` in its own frame, ``radii``)."""
+    out = 0.0
+    for k, c in col.items():
+        w, t = x[c:c + 3], x[c + 3:c + 6]
+        centre = T[k][:3, :3] @ centres[k] + T[k][:3, 3]
+        out = max(out, float(np.linalg.norm(np.cross(w, centre) + t) + np.linalg.norm(w) * radii[k]))
+    return out
+
+
 def refine(
     T_group_fragment: np.ndarray,
     surfaces: list[FractureSurface],
     *,
     tol: float,
     normal_angle: float = 30.0,
-    iterations: int = 15,
+    iterations: int = 100,
+    stop: float = 0.01,
     anchor: int = 0,
     levels: tuple[float, ...] = (2.0, 1.0),
     n_points: int = 1500,
@@ -703,7 +722,8 @@ def refine(
     surfaces : FractureSurface per fragment
     tol : contact tolerance (mesh units)
     normal_angle : degrees from exactly opposed normals still counted
-    iterations : per level
+    iterations : at most this many per level
+    stop : a level ends when no fragment's samples move more than ``stop * tol`` in an iteration
     anchor : index of the fragment that stays fixed
     n_points : fracture samples per fragment used (the first: they are in random order)
     gap : separation kept between mating surfaces (mesh units; RegistrationParams.gap)
@@ -748,7 +768,7 @@ def refine(
                 step[:3, 3] = x[c + 3:c + 6]
                 T[k] = step @ T[k]
             pairs = touching  # the motions are small: pairs apart now stay apart in this level
-            if np.abs(x).max() < 1e-7 * max(tol, 1e-300):
+            if _largest_motion(x, col, T, centres, radii) <= stop * tol:
                 break
     return T
 

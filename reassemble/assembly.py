@@ -42,10 +42,9 @@ class AssemblyParams:
         each a share of the smaller break: :func:`registration.contact_score`)
     max_penetration : a merge is rejected when any two fragments it brings together
         interpenetrate by more than this share of the smaller one's surface area
-    refine_iterations : at most this many joint point-to-plane iterations per level of
-        :func:`refine` (it stops sooner when converged: ``refine_stop``)
-    refine_stop : the refinement stops when no fragment's samples move more than this share
-        of the contact tolerance in an iteration
+    refine_iterations : joint point-to-plane iterations per coarse level of :func:`refine`
+    refine_max_iterations : at most this many at its finest level, which ends when converged:
+        no fragment's samples moving more than ``refine_stop`` times the contact tolerance
     group_rounds : rounds of registering whole sub-assemblies against each other
     starts : greedy merging is run from this many first merges (the best proposals of two
         lone fragments, in order) and the outcome with the largest verified total kept
@@ -64,7 +63,8 @@ class AssemblyParams:
     candidates: int = 7
     min_gain: float = 0.06
     max_penetration: float = 0.02
-    refine_iterations: int = 100
+    refine_iterations: int = 15
+    refine_max_iterations: int = 100
     refine_stop: float = 0.01
     group_rounds: int = 3
     starts: int = 4
@@ -467,7 +467,8 @@ def assemble(
     for g in members.values():
         if len(g) > 1:
             poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
-                              iterations=params.refine_iterations, stop=params.refine_stop,
+                              iterations=params.refine_iterations, max_iterations=params.refine_max_iterations,
+                              stop=params.refine_stop,
                               anchor=int(np.argmax(areas[g])),
                               levels=params.refine_levels, n_points=params.refine_samples, gap=gap,
                               rim_reach=params.rim_reach, rim_weight=params.rim_weight)
@@ -697,7 +698,8 @@ def refine(
     *,
     tol: float,
     normal_angle: float = 30.0,
-    iterations: int = 100,
+    iterations: int = 15,
+    max_iterations: int = 100,
     stop: float = 0.01,
     anchor: int = 0,
     levels: tuple[float, ...] = (2.0, 1.0),
@@ -722,8 +724,9 @@ def refine(
     surfaces : FractureSurface per fragment
     tol : contact tolerance (mesh units)
     normal_angle : degrees from exactly opposed normals still counted
-    iterations : at most this many per level
-    stop : a level ends when no fragment's samples move more than ``stop * tol`` in an iteration
+    iterations : per coarse level
+    max_iterations, stop : the finest level iterates until no fragment's samples move more
+        than ``stop * tol`` in an iteration, at most ``max_iterations`` times
     anchor : index of the fragment that stays fixed
     n_points : fracture samples per fragment used (the first: they are in random order)
     gap : separation kept between mating surfaces (mesh units; RegistrationParams.gap)
@@ -744,13 +747,14 @@ def refine(
     for distance in (f * tol for f in levels):
         pairs = [(p, q) for p in range(m) for q in range(m) if p != q and len(surfaces[p].samples)
                  and len(surfaces[q].samples) and _near(T[p], T[q], p, q, centres, radii, distance + gap)]
-        for _ in range(iterations):
+        finest = distance == levels[-1] * tol
+        for _ in range(max_iterations if finest else iterations):
             pts = [transform_points(T[k], s.samples[:n_points]) for k, s in enumerate(surfaces)]
             nrm = [s.sample_normals[:n_points] @ T[k][:3, :3].T for k, s in enumerate(surfaces)]
             # each source sample is matched to the target's surface moved out by the gap
             trees = {q: cKDTree(pts[q] + gap * nrm[q]) for q in {q for _, q in pairs}}
             rims = None
-            if rim_reach > 0 and distance == levels[-1] * tol:  # once contact has settled
+            if rim_reach > 0 and finest:  # once contact has settled
                 rims = [None if s.rim is None or len(s.rim) < 6 else
                         (transform_points(T[k], s.rim), s.rim_directions @ T[k][:3, :3].T) for k, s in enumerate(surfaces)]
                 rims = [r if r is None else (*r, cKDTree(r[0])) for r in rims]
@@ -762,13 +766,14 @@ def refine(
                 return T
             scale = max(np.trace(AtA) / max(len(AtA), 1), 1e-300)
             x = np.linalg.solve(AtA + 1e-6 * scale * np.eye(len(AtA)), Atb)
+            converged = finest and _largest_motion(x, col, T, centres, radii) <= stop * tol
             for k, c in col.items():
                 step = np.eye(4)
                 step[:3, :3] = rotation_from_vector(x[c:c + 3])
                 step[:3, 3] = x[c + 3:c + 6]
                 T[k] = step @ T[k]
             pairs = touching  # the motions are small: pairs apart now stay apart in this level
-            if _largest_motion(x, col, T, centres, radii) <= stop * tol:
+            if converged or np.abs(x).max() < 1e-7 * max(tol, 1e-300):
                 break
     return T
 

@@ -156,6 +156,22 @@ def test_refine_recovers_perturbed_poses(puzzle, prepared):
         assert np.linalg.norm(out[k][:3, :3] @ c + out[k][:3, 3] - truth[k][:3, :3] @ c - truth[k][:3, 3]) < 1e-3 * size
 
 
+@pytest.mark.slow
+def test_refine_converges_where_only_rims_fix_a_turn(tmp_path):
+    """A torus in three by mixed cuts, with scan noise: each break is a disk whose turn about
+    the tube is fixed by little relief, and contact alone has a minimum a few degrees off.
+    The rims pull the joint refinement to the truth, slowly: a fixed 15 iterations left one
+    fragment 2.3 degrees off (unsolved); iterated until it converges, it is solved."""
+    from reassemble.files import bundled_meshes
+
+    params = BreakParams(pieces=3, style="mixed", noise=0.001)
+    break_to_folder(bundled_meshes()["torus"], tmp_path / "puzzle", params=params, seed=0)
+    run_to_folder([tmp_path / "puzzle" / "fragments"], tmp_path / "out", seed=0)
+    s = _score(tmp_path / "out", tmp_path / "puzzle")
+    assert s["solved"], s
+    assert s["rot_geodesic_rmse_deg"] < 0.5
+
+
 def _axis_angle(axis, angle):
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K

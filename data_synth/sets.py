@@ -121,6 +121,9 @@ FIELD_MESHES = {
     "tile": FieldMesh("sherds", "tuning", "shapes:tile_mesh",
                       "a flat tile with a raised border (data_synth.shapes): flat sherds, CAD-like large triangles",
                       rotates=False),
+    "flange": FieldMesh("CAD", "tuning", "shapes:flange_mesh",
+                        "a flat ring with a bore collar, 8 bolt holes and a key notch (data_synth.shapes): "
+                        "flat CAD rings, large triangles", rotates=False),
     # validation half
     "fish_low_resolution": FieldMesh("smooth organic", "validation", "fish_low_resolution",
                                      "smooth like the cow, coarse triangles (1.9k faces)"),

@@ -173,6 +173,27 @@ def tile_mesh(*, thickness: float = 0.05, segments: int = 32) -> tuple[np.ndarra
     return np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64)
 
 
+def flange_mesh(*, thickness: float = 0.1, segments: int = 48) -> tuple[np.ndarray, np.ndarray]:
+    """A flat annular flange (outer radius 1, bore 0.45, ``thickness`` thick) with a collar
+    0.08 wide and 0.12 high round the bore, eight bolt holes on the 0.72 circle and a key
+    notch in the outer rim: a flat ring of CAD (gaskets, flanges, washers), meshed as CAD
+    is, with a few large triangles per face."""
+    import manifold3d as m3
+
+    def disk(radius, height, z=0.0, n=segments):
+        return m3.Manifold.cylinder(height, radius, circular_segments=n).translate([0.0, 0.0, z])
+
+    ring = disk(1.0, thickness) - disk(0.45, 3 * thickness, -thickness)
+    ring = ring + (disk(0.53, 0.12, thickness) - disk(0.45, 0.2, thickness - 0.05))
+    for k in range(8):
+        a = 2.0 * np.pi * (k + 0.5) / 8
+        ring = ring - disk(0.06, 3 * thickness, -thickness, segments // 3).translate(
+            [0.72 * np.cos(a), 0.72 * np.sin(a), 0.0])
+    ring = ring - m3.Manifold.cube([0.2, 0.16, 3 * thickness], center=True).translate([1.0, 0.0, 0.0])
+    mesh = ring.to_mesh()
+    return np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64)
+
+
 def _vessel(z_ctrl, r_ctrl, *, wall: float, segments: int, rows: int) -> tuple[np.ndarray, np.ndarray]:
     """Closed solid of revolution: the outer profile r(z) through the control points, the
     inner one ``wall`` in from it, a flat base ``wall`` thick, open at the top."""

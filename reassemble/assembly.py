@@ -468,8 +468,7 @@ def assemble(
         if len(g) > 1:
             poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
                               iterations=params.refine_iterations, max_iterations=params.refine_max_iterations,
-                              stop=params.refine_stop,
-                              anchor=int(np.argmax(areas[g])),
+                              stop=params.refine_stop, anchor=int(np.argmax(areas[g])),
                               levels=params.refine_levels, n_points=params.refine_samples, gap=gap,
                               rim_reach=params.rim_reach, rim_weight=params.rim_weight)
 

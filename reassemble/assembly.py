@@ -678,17 +678,16 @@ def _normal_equations(pairs: list[tuple[int, int]], pts: list[np.ndarray], nrm: 
     return AtA, Atb, rows, touching
 
 
-def _largest_motion(x: np.ndarray, col: dict[int, int], T: np.ndarray, centres: np.ndarray,
+def _largest_motion(x: np.ndarray, free: list[int], T: np.ndarray, centres: np.ndarray,
                     radii: np.ndarray) -> float:
-    """The farthest any fragment's samples move by the step ``x`` (per free fragment k at
-    ``col[k]``: rotation vector, translation) taken at poses ``T`` (before it): a bound from
-    its bounding sphere (``centres`` in its own frame, ``radii``)."""
-    out = 0.0
-    for k, c in col.items():
-        w, t = x[c:c + 3], x[c + 3:c + 6]
-        centre = T[k][:3, :3] @ centres[k] + T[k][:3, 3]
-        out = max(out, float(np.linalg.norm(np.cross(w, centre) + t) + np.linalg.norm(w) * radii[k]))
-    return out
+    """The farthest any fragment's samples move by the step ``x`` (6 unknowns per fragment
+    of ``free``, in order: rotation vector, translation) taken at poses ``T`` (before it): a
+    bound from each one's bounding sphere (``centres`` in its own frame, ``radii``)."""
+    step = x.reshape(len(free), 6)
+    w, t = step[:, :3], step[:, 3:]
+    centre = np.einsum("kij,kj->ki", T[free, :3, :3], centres[free]) + T[free, :3, 3]
+    move = np.linalg.norm(np.cross(w, centre) + t, axis=1) + np.linalg.norm(w, axis=1) * radii[free]
+    return float(move.max()) if len(move) else 0.0
 
 
 def refine(
@@ -743,10 +742,10 @@ def refine(
     free = [k for k in range(m) if k != anchor]
     col = {k: 6 * x for x, k in enumerate(free)}
     centres, radii = _spheres(surfaces)
-    for distance in (f * tol for f in levels):
+    for level, factor in enumerate(levels):
+        distance, finest = factor * tol, level == len(levels) - 1
         pairs = [(p, q) for p in range(m) for q in range(m) if p != q and len(surfaces[p].samples)
                  and len(surfaces[q].samples) and _near(T[p], T[q], p, q, centres, radii, distance + gap)]
-        finest = distance == levels[-1] * tol
         for _ in range(max_iterations if finest else iterations):
             pts = [transform_points(T[k], s.samples[:n_points]) for k, s in enumerate(surfaces)]
             nrm = [s.sample_normals[:n_points] @ T[k][:3, :3].T for k, s in enumerate(surfaces)]
@@ -765,7 +764,7 @@ def refine(
                 return T
             scale = max(np.trace(AtA) / max(len(AtA), 1), 1e-300)
             x = np.linalg.solve(AtA + 1e-6 * scale * np.eye(len(AtA)), Atb)
-            converged = finest and _largest_motion(x, col, T, centres, radii) <= stop * tol
+            converged = finest and _largest_motion(x, free, T, centres, radii) <= stop * tol
             for k, c in col.items():
                 step = np.eye(4)
                 step[:3, :3] = rotation_from_vector(x[c:c + 3])

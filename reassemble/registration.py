@@ -572,7 +572,12 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
                 return T, gap
             n = target.sample_normals[j[ok]]
             p, q = p[ok], target.samples[j[ok]] + gap * n
-            A = np.hstack([np.cross(p, n), n])
+            # turns about the contact's centre, in length units (x[:3] times the contact's
+            # RMS radius): the columns are then comparable, and a motion the contact leaves
+            # (nearly) free can be told by its singular value, whatever the fragment's pose
+            centre = p.mean(axis=0)
+            radius = max(float(np.sqrt(np.mean(np.sum((p - centre) ** 2, axis=1)))), 1e-300)
+            A = np.hstack([np.cross(p - centre, n) / radius, n])
             b = -np.einsum("ij,ij->i", p - q, n)
             if rim_tree is not None and level == levels[-1]:
                 pr, qr, v, weights = rim_pairs(transform_points(T, source.rim), source.rim_directions @ T[:3, :3].T,
@@ -580,25 +585,47 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
                                                tol=tol, tree=rim_tree)
                 if len(pr) >= 6:  # rim_weight times the contact rows' weight in all
                     w = np.sqrt(rim_weight * len(A) * weights / weights.sum())
-                    A = np.vstack([A, w[:, None] * np.hstack([np.cross(pr, v), v])])
+                    A = np.vstack([A, w[:, None] * np.hstack([np.cross(pr - centre, v) / radius, v])])
                     b = np.concatenate([b, -w * np.einsum("ij,ij->i", pr - qr, v)])
             moved = 0.0
             if max_gap > 0:  # the separation grows by x[6]: (p - q) n + A x - x[6] = 0
-                x = np.linalg.lstsq(np.hstack([A, -np.ones((len(A), 1))]), b, rcond=None)[0]
+                x = _solve(np.hstack([A, -np.ones((len(A), 1))]), b)
                 new = float(np.clip(gap + x[6], 0.0, max_gap))
                 if new != gap + x[6]:
-                    x = np.linalg.lstsq(A, b + (new - gap), rcond=None)[0]
+                    x = _solve(A, b + (new - gap))
                 moved, gap = abs(new - gap), new
                 tree = cKDTree(target.samples + gap * target.sample_normals)
             else:
-                x = np.linalg.lstsq(A, b, rcond=None)[0]
+                x = _solve(A, b)
+            x[:3] /= radius
             step = np.eye(4)
             step[:3, :3] = rotation_from_vector(x[:3])
-            step[:3, 3] = x[3:6]
+            step[:3, 3] = x[3:6] + centre - step[:3, :3] @ centre
             T = step @ T
             if np.linalg.norm(x[:3]) < 1e-7 and np.linalg.norm(x[3:6]) < 1e-6 * tol and moved < 1e-6 * tol:
                 break
     return T, gap
+
+
+ICP_RCOND = 1e-3  # ICP leaves the motions whose singular value is under this share of the largest
+
+
+def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The least-squares step of ICP, with the motions the contact leaves (nearly) free
+    left alone.
+
+    Notes
+    -----
+    A contact that does not pin every motion (a planar face slides in its plane, a narrow
+    sherd's strip along a smoothly curved break) has singular values near zero; the
+    minimum-norm solution then turns residuals of the sampling itself (a ten-thousandth of
+    the tolerance) into steps of several tolerances along those motions, and from the true
+    pose of a vessel's sherds ICP walked off a third of the contact. Truncating the small
+    singular values (``ICP_RCOND``, relative to the largest, with turns in length units)
+    keeps such a motion where the hypothesis put it; penetration and the rims' rows, when
+    present, are what pin it.
+    """
+    return np.linalg.lstsq(A, b, rcond=ICP_RCOND)[0]
 
 
 def _within(points: np.ndarray, surf: FractureSurface, tol: float) -> np.ndarray:

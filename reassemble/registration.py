@@ -607,7 +607,7 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
     return T, gap
 
 
-ICP_RCOND = 1e-3  # ICP leaves the motions whose singular value is under this share of the largest
+ICP_RCOND = 1e-4  # ICP leaves the motions whose singular value is under this share of the largest
 
 
 def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:

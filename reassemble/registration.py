@@ -492,6 +492,7 @@ def icp(
 
 
 RIM_HUBER = 0.25  # rim offsets beyond this many contact tolerances weigh as 1/offset (Huber)
+ICP_RCOND = 1e-4  # ICP leaves the motions whose singular value is under this share of the largest (_solve)
 
 
 def rim_pairs(points: np.ndarray, directions: np.ndarray, target_points: np.ndarray, target_directions: np.ndarray,
@@ -607,9 +608,6 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
     return T, gap
 
 
-ICP_RCOND = 1e-4  # ICP leaves the motions whose singular value is under this share of the largest
-
-
 def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The least-squares step of ICP, with the motions the contact leaves (nearly) free
     left alone.
@@ -618,12 +616,11 @@ def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     -----
     A contact that does not pin every motion (a planar face slides in its plane, a narrow
     sherd's strip along a smoothly curved break) has singular values near zero; the
-    minimum-norm solution then turns residuals of the sampling itself (a ten-thousandth of
-    the tolerance) into steps of several tolerances along those motions, and from the true
-    pose of a vessel's sherds ICP walked off a third of the contact. Truncating the small
-    singular values (``ICP_RCOND``, relative to the largest, with turns in length units)
-    keeps such a motion where the hypothesis put it; penetration and the rims' rows, when
-    present, are what pin it.
+    minimum-norm solution then turns the sampling's own tiny residuals into steps of
+    several tolerances along those motions, and from the true pose of a vessel's sherds
+    ICP walked off most of the contact (``tests/test_shells.py``). Truncating the small
+    singular values (``ICP_RCOND``, relative to the largest, turns in length units) keeps
+    such a motion where the hypothesis put it, unless the rims' rows pin it.
     """
     return np.linalg.lstsq(A, b, rcond=ICP_RCOND)[0]
 

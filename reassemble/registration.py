@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .features import FractureSurface, mate_signature, offset_surface
-from .geometry import farthest_points, invert_transform, rotation_angle_deg, rotation_from_vector, transform_points
+from .geometry import (farthest_points, invert_transform, make_transform, rotation_angle_deg, rotation_from_vector,
+                       transform_points)
 from .planes import planar_patches, plane_placements
 
 
@@ -599,10 +600,8 @@ def _icp(source, target, T, *, tol, normal_angle, iterations, levels, tree, n_po
             else:
                 x = _solve(A, b)
             x[:3] /= radius
-            step = np.eye(4)
-            step[:3, :3] = rotation_from_vector(x[:3])
-            step[:3, 3] = x[3:6] + centre - step[:3, :3] @ centre
-            T = step @ T
+            R = rotation_from_vector(x[:3])
+            T = make_transform(R, x[3:6] + centre - R @ centre) @ T
             if np.linalg.norm(x[:3]) < 1e-7 and np.linalg.norm(x[3:6]) < 1e-6 * tol and moved < 1e-6 * tol:
                 break
     return T, gap

@@ -358,6 +358,13 @@ def write_ply(
     _atomic_write(Path(path), header + vertices.tobytes() + face_rec.tobytes())
 
 
+def file_in(path: str | os.PathLike, name: str) -> Path:
+    """``path``, or ``path / name`` when ``path`` is a folder (a run's output folder for its
+    ``transforms.json``, a puzzle's folder for its ``ground_truth.json``)."""
+    path = Path(path)
+    return path / name if path.is_dir() else path
+
+
 def read_json(path: str | os.PathLike, *, what: str) -> Any:
     """Read a JSON file, with a one-line error that says what the file should have been."""
     path = Path(path)

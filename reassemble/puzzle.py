@@ -14,6 +14,7 @@ from . import __version__
 from .errors import ReassembleError
 from .files import (
     TRANSFORMS_CONVENTION,
+    file_in,
     load_mesh,
     load_solid,
     mesh_warning,
@@ -113,8 +114,9 @@ class PuzzleFiles:
 
 
 def read_puzzle(ground_truth: str | Path, *, with_labels: bool = True) -> PuzzleFiles:
-    """Read a ``ground_truth.json`` and the fragment meshes (and labels) beside it."""
-    gt_path = Path(ground_truth)
+    """Read a ``ground_truth.json`` (or the puzzle folder holding it) and the fragment meshes
+    (and labels) beside it."""
+    gt_path = file_in(ground_truth, "ground_truth.json")
     gt = read_json(gt_path, what="a ground_truth.json written by 'reassemble break'")
     if not isinstance(gt, dict) or not isinstance(gt.get("fragments"), dict) or "object" not in gt:
         raise ReassembleError(f"{gt_path}: not a ground_truth.json (no 'fragments' and 'object')")
@@ -136,7 +138,9 @@ def read_puzzle(ground_truth: str | Path, *, with_labels: bool = True) -> Puzzle
 def evaluate_files(
     predicted: str | Path, ground_truth: str | Path, *, n_points: int = 1000, seed: int = 0
 ) -> dict:
-    """Score ``predicted`` (a transforms.json) against a puzzle's ``ground_truth.json``."""
+    """Score ``predicted`` (a transforms.json, or the run's folder) against a puzzle's
+    ``ground_truth.json`` (or the puzzle's folder)."""
+    predicted, ground_truth = file_in(predicted, "transforms.json"), file_in(ground_truth, "ground_truth.json")
     pred = read_transforms(predicted)
     truth = read_transforms(ground_truth)
     puzzle = read_puzzle(ground_truth, with_labels=False)

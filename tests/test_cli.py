@@ -4,6 +4,7 @@ import contextlib
 import hashlib
 import io
 import json
+import shutil
 import subprocess
 import sys
 
@@ -54,6 +55,13 @@ def test_break_then_eval(tmp_path):
     assert "part accuracy" in out and "1.000" in out
     report = json.loads((tmp_path / "score.json").read_text())
     assert report["alignments"]["anchor_largest"]["summary"]["part_acc_strict"] == 1.0
+    # folders are read too: a run's output folder for its transforms.json, a puzzle's for its ground truth
+    shutil.copy(gt, tmp_path / "transforms.json")
+    rc, out, err = run("eval", tmp_path, tmp_path / "p")
+    assert rc == 0, err
+    assert "1.000" in out
+    rc, out, err = run("eval", tmp_path / "p" / "fragments", tmp_path / "p")
+    assert_one_line_error(rc, err, "transforms.json", "no such file")
 
 
 def test_existing_output_is_refused_then_replaced_with_force(tmp_path):

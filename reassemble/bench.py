@@ -201,6 +201,7 @@ def pipeline_solver(meshes: dict, *, config) -> tuple[dict, dict]:
         labels; a solver that does not segment may leave it out)
     info : what ``report.json`` says of the run: its steps' seconds, the gap it used (a
         fraction of the reference size), the most Taubin iterations a fragment was matched with
+        and, when the run segmented again, ``fallback`` (as in ``report.json``)
     """
     from .pipeline import reassemble
 
@@ -211,6 +212,8 @@ def pipeline_solver(meshes: dict, *, config) -> tuple[dict, dict]:
     info = {"timings_s": {k: round(v, 3) for k, v in result.timings.items()},
             "gap": round(float(result.config.registration.gap), 6),
             "smoothing": int(max(f.smoothing for f in result.fragments))}
+    if result.fallback is not None:  # which segmentations were tried, and which assembly was kept
+        info["fallback"] = result.fallback
     return predicted, info
 
 

@@ -83,8 +83,9 @@ def reassemble(
     ``assemble`` False stops after matching the pairs (what ``reassemble match`` writes).
     ``jobs`` > 1 describes fragments and registers pairs in that many processes; the
     result does not depend on it, nor on ``scheduler`` (the address of a Dask cluster to do
-    that work on instead). When the assembly leaves fragments unplaced, the set is
-    segmented again, with the planar mates of its break faces labelled too and then with
+    that work on instead). When the assembly leaves fragments unplaced (or placed with most
+    of the break open: ``config.segment.retry_below``), the set is segmented again, with
+    the planar mates of its break faces labelled too and then with
     ``config.segment.fallback`` evidence, and matched and assembled again; the assembly
     with most whole-surface contact is kept (:mod:`arbiter`); a set found thin-walled by the
     automatic test (``config.thin_walls`` None) is matched as solids too, kept the same way. With
@@ -121,11 +122,11 @@ def reassemble(
         tried.append(again)
         result = _better(result, again, config=config)
     for retry in retries:
-        # another segmentation can only help a fragment that was described and still not placed
-        if not any(not p and f.descriptors is not None for p, f in zip(result.assembly.placed, result.fragments)):
+        unplaced, open_break = _open(result, below=config.segment.retry_below)
+        if not unplaced and not open_break:
             break
-        log.info("%d of %d fragments unplaced: segmenting with %s too",
-                 np.count_nonzero(~result.assembly.placed), len(result.fragments), _label(retry))
+        log.info("%d of %d fragments unplaced, %d placed with most of the break open: segmenting with %s too",
+                 unplaced, len(result.fragments), open_break, _label(retry))
         again = _match(described, retry, jobs=jobs, scheduler=scheduler, progress=progress, unless=tried,
                        memo=memo)
         if again is None:
@@ -144,6 +145,16 @@ def reassemble(
     if not (sherds and result is tried[0]):  # the sherds' assembly above already asked every partner
         _assemble(result, limit=None, **more)
     return result
+
+
+def _open(result: Result, *, below: float) -> tuple[int, int]:
+    """How many described fragments the assembly left unplaced, and how many it placed with
+    less than ``below`` of their labelled break in contact: those another segmentation
+    can help."""
+    described = np.array([f.descriptors is not None for f in result.fragments])
+    placed = result.assembly.placed
+    return (int(np.count_nonzero(described & ~placed)),
+            int(np.count_nonzero(described & placed & (result.assembly.confidence < below))))
 
 
 def _segmentations(config: Config, n: int) -> tuple[Config, list[Config]]:

@@ -84,6 +84,11 @@ class SegmentParams:
         with them and tries without
     mate_overlap : the share of either outline on the other, laid together, that makes a
         plane a mate (a clean break's two faces coincide)
+    retry_below : a run segments again (``mates``, then ``fallback``) also when a placed
+        fragment has less than this share of its labelled break in contact
+        (:attr:`assembly.Assembly.confidence`): in a complete set every break is covered by
+        its mate, and one left open was often found on one side only (0: only when
+        fragments are unplaced)
 
     Notes
     -----
@@ -103,6 +108,7 @@ class SegmentParams:
     fallback: str | None = "mixture"
     mates: bool | None = None
     mate_overlap: float = 0.9
+    retry_below: float = 0.5
 
     def __post_init__(self):
         from .errors import ReassembleError
@@ -110,6 +116,8 @@ class SegmentParams:
         for name, value in (("method", self.method), ("fallback", self.method if self.fallback is None else self.fallback)):
             if value not in METHODS:
                 raise ReassembleError(f"segment.{name} must be one of {', '.join(METHODS)} (got {value!r})")
+        if not 0.0 <= self.retry_below <= 1.0:
+            raise ReassembleError(f"segment.retry_below must be between 0 and 1, got {self.retry_below}")
 
 
 @dataclass

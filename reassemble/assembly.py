@@ -464,10 +464,9 @@ def assemble(
                                params=params, reg_params=reg_params, seed=seed, common=common,
                                registered=set(pair_results), jobs=jobs, scheduler=scheduler,
                                memo=GroupMemo() if memo is None else memo)
-    final = dict(common, surfaces=surfaces, cache={})
     for g in members.values():
         if len(g) > 1:
-            poses[g] = _refined(poses[g], g, params=params, common=final)
+            poses[g] = _refined(poses[g], g, surfaces=surfaces, params=params, common=common)
 
     # contacts at the final poses, and the groups renumbered by area
     contacts = []
@@ -492,10 +491,12 @@ def assemble(
     return Assembly(poses, group, placed, confidence, contacts, merges)
 
 
-def _refined(T_group_fragment: np.ndarray, g: list[int], *, params: AssemblyParams, common: dict) -> np.ndarray:
-    """The poses of the sub-assembly ``g`` after :func:`refine`, unless refining lowers its
-    verified total (:func:`_total`, on every sample): then refined at the finest level
-    alone, and the merged poses kept when that lowers it too.
+def _refined(T_group_fragment: np.ndarray, g: list[int], *, surfaces: list[FractureSurface],
+             params: AssemblyParams, common: dict) -> np.ndarray:
+    """The poses of the sub-assembly ``g`` after :func:`refine` (on ``surfaces``), unless
+    refining lowers its verified total (:func:`_total`, on the merges' samples and cache):
+    then refined at the finest level alone, and the merged poses kept when that lowers it
+    too.
 
     Notes
     -----
@@ -506,24 +507,23 @@ def _refined(T_group_fragment: np.ndarray, g: list[int], *, params: AssemblyPara
     Contact is what the refinement should add; a result with less is not kept.
     """
     reg_params, tol, gap = common["reg_params"], common["tol"], common["gap"]
-    surfaces = [common["surfaces"][k] for k in g]
-    sub = dict(common, surfaces=surfaces, scenes=[common["scenes"][k] for k in g],
-               centres=common["centres"][g], radii=common["radii"][g], cache={})
-    one = {0: list(range(len(g)))}
+    group = np.full(len(common["surfaces"]), -1)
+    group[g] = 0
+    poses = np.tile(np.eye(4), (len(group), 1, 1))
 
     def total(T):
-        return _total((np.zeros(len(g), int), T, one), **sub)
+        poses[g] = T
+        return _total((group, poses, {0: list(g)}), **common)
 
-    best, best_total = T_group_fragment, total(T_group_fragment)
+    best_total = total(T_group_fragment)
     for levels in dict.fromkeys([tuple(params.refine_levels), tuple(params.refine_levels[-1:])]):
-        T = refine(T_group_fragment, surfaces, tol=tol, normal_angle=reg_params.normal_angle,
+        T = refine(T_group_fragment, [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
                    iterations=params.refine_iterations, max_iterations=params.refine_max_iterations,
                    stop=params.refine_stop, anchor=int(np.argmax(common["areas"][g])), levels=levels,
                    n_points=params.refine_samples, gap=gap, rim_reach=params.rim_reach, rim_weight=params.rim_weight)
-        score = total(T)
-        if score >= best_total:
+        if total(T) >= best_total:
             return T
-    return best
+    return T_group_fragment
 
 
 def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, params, reg_params, seed, common,
@@ -838,6 +838,47 @@ def contact_points(
         points_a = surfaces[c.a].samples[touching]
         keep = farthest_points(points_a, count)
         out.append((points_a[keep], closest[keep]))
+    return out
+
+
+def contact_faces(
+    assembly: Assembly,
+    meshes: list[tuple[np.ndarray, np.ndarray]],
+    *,
+    tol: float,
+    gap: float = 0.0,
+    normal_angle: float = 60.0,
+) -> list[np.ndarray]:
+    """Which faces of each fragment touch another fragment of its sub-assembly.
+
+    A face touches when its centre lies within ``tol`` of ``gap`` from the surface of a
+    fragment it is in contact with (``assembly.contacts``), facing it: normals opposed
+    within ``normal_angle`` degrees (mating surfaces face each other; the original surface
+    beside a seam meets the other side's break at a right angle; the margin is for a
+    scan's noisy face normals).
+
+    Returns
+    -------
+    (f,) bool per fragment, over its faces
+    """
+    import open3d as o3d
+
+    from .geometry import face_normals
+
+    out = [np.zeros(len(f), bool) for _, f in meshes]
+    scenes: dict = {}
+    for c in assembly.contacts:
+        for p, q in ((c.a, c.b), (c.b, c.a)):
+            if q not in scenes:
+                scenes[q] = make_scene(*meshes[q])
+            v, f = meshes[p]
+            T_q_p = invert_transform(assembly.T_group_fragment[q]) @ assembly.T_group_fragment[p]
+            centres = transform_points(T_q_p, v[f].mean(axis=1))
+            closest = scenes[q].compute_closest_points(o3d.core.Tensor(centres.astype(np.float32)))
+            dist = np.linalg.norm(closest["points"].numpy().astype(np.float64) - centres, axis=1)
+            facing = (np.einsum("ij,ij->i", face_normals(v, f) @ T_q_p[:3, :3].T, closest["primitive_normals"].numpy())
+                      < -np.cos(np.radians(normal_angle)))
+            out[p] |= (np.abs(dist - gap) < tol) & facing
     return out
 
 

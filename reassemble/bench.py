@@ -197,8 +197,9 @@ def pipeline_solver(meshes: dict, *, config) -> tuple[dict, dict]:
     Returns
     -------
     predicted : name -> ``{"transform": (4, 4) T_world_fragment, "placed": bool, "fracture":
-        (faces,) bool}``, the last the fracture faces the run found (``analysis.npz``'s
-        labels; a solver that does not segment may leave it out)
+        (faces,) bool, "segmented": (faces,) bool}``, the fracture faces the run found after
+        its assembly and those its segmentation labelled (``analysis.npz``'s ``fracture_k``
+        and ``segmented_k``; a solver that does not segment may leave them out)
     info : what ``report.json`` says of the run: its steps' seconds, the gap it used (a
         fraction of the reference size), the most Taubin iterations a fragment was matched with
         and, when the run segmented again, ``fallback`` (as in ``report.json``)
@@ -207,7 +208,7 @@ def pipeline_solver(meshes: dict, *, config) -> tuple[dict, dict]:
 
     result = reassemble(meshes, config, jobs=1)
     predicted = {f.name: {"transform": result.T_world[k], "placed": bool(result.assembly.placed[k]),
-                          "fracture": np.asarray(f.segmentation.fracture, bool)}
+                          "fracture": result.fracture[k], "segmented": np.asarray(f.segmentation.fracture, bool)}
                  for k, f in enumerate(result.fragments)}
     info = {"timings_s": {k: round(v, 3) for k, v in result.timings.items()},
             "gap": round(float(result.config.registration.gap), 6),

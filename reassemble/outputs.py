@@ -98,9 +98,12 @@ def write_match_folder(out, result, *, warnings: list[str], force: bool, debug: 
             write_debug(tmp, frags, result.pairs)
 
 
-def analysis_arrays(frags: list[PreparedFragment], contacts, touching, *, size: float, radii) -> dict:
+def analysis_arrays(frags: list[PreparedFragment], contacts, touching, *, size: float, radii,
+                    fracture: list[np.ndarray] | None = None) -> dict:
     """Arrays of ``analysis.npz``: ``names`` (n,), ``radii`` (r,) in mesh units and
-    ``radii_relative``; per fragment k ``fracture_k`` (faces,) int8 and, when it has
+    ``radii_relative``; per fragment k ``fracture_k`` (faces,) int8, its break surface
+    (``fracture[k]``, after the assembly; the segmentation's labels without it) and
+    ``segmented_k`` (faces,) int8, the segmentation's labels, and, when it has
     descriptors, ``H_k`` (faces, r) float32 mean curvature at the face centres; per contact i
     (``contact_pairs`` (c, 2) fragment indices) ``contact_i_a`` / ``contact_i_b`` (p, 3)
     touching points, each in its own fragment's coordinates."""
@@ -108,7 +111,8 @@ def analysis_arrays(frags: list[PreparedFragment], contacts, touching, *, size: 
               "radii_relative": np.asarray(radii, float),
               "contact_pairs": np.array([[c.a, c.b] for c in contacts], np.int64).reshape(-1, 2)}
     for k, f in enumerate(frags):
-        arrays[f"fracture_{k}"] = f.segmentation.fracture.astype(np.int8)
+        arrays[f"segmented_{k}"] = f.segmentation.fracture.astype(np.int8)
+        arrays[f"fracture_{k}"] = (f.segmentation.fracture if fracture is None else fracture[k]).astype(np.int8)
         if f.descriptors is not None:
             arrays[f"H_{k}"] = f.descriptors.H.astype(np.float32)
     for i, (points_a, points_b) in enumerate(touching):
@@ -206,7 +210,8 @@ def write_run_folder(out, result, *, report: dict, force: bool, debug: bool) -> 
         write_json(tmp / "report.json", report)
         write_json(tmp / "config.json", config_json(result))
         write_npz(tmp / "analysis.npz", **analysis_arrays(frags, result.assembly.contacts, result.touching,
-                                                          size=result.size, radii=result.config.radii))
+                                                          size=result.size, radii=result.config.radii,
+                                                          fracture=result.fracture))
         _write_assembled(tmp, result)
         if debug:
             write_debug(tmp, frags, result.pairs)

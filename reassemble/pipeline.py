@@ -27,6 +27,7 @@ from .pairs import PairMemo, match_pairs, match_set, registration_params
 from .prepare import DescribedSet, PreparedFragment, describe_fragments, prepare_fragments, reference_size, thin_walled
 from .puzzle import PuzzleFiles, break_to_folder, evaluate_files, read_puzzle
 from .retrieval import candidates_only, first_pairs, more_pairs, partner_votes
+from .segmentation import labels_from_contact
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +53,9 @@ class Result:
     assembly : assembly.Assembly, None when only the pairs were matched
     T_world : (n, 4, 4) T_world_fragment per fragment (:func:`assembly.world_poses`)
     touching : per contact of the assembly, the touching points of either fragment
+    fracture : (faces,) bool per fragment, its break surface after the assembly: the
+        segmentation's labels where the fragment is not placed with others, else the
+        faces in contact (:func:`segmentation.labels_from_contact`)
     timings : seconds per step
     fallback : when the set was segmented again (planar mates, ``config.segment.fallback``):
         the segmentation kept, whether it is not the first, and each tried assembly's
@@ -68,6 +72,7 @@ class Result:
     assembly: assembly.Assembly | None = None
     T_world: np.ndarray | None = None
     touching: list | None = None
+    fracture: list | None = None
     timings: dict = dataclasses.field(default_factory=dict)
     fallback: dict | None = None
     fallback_contact: list | None = None
@@ -83,9 +88,8 @@ def reassemble(
     ``assemble`` False stops after matching the pairs (what ``reassemble match`` writes).
     ``jobs`` > 1 describes fragments and registers pairs in that many processes; the
     result does not depend on it, nor on ``scheduler`` (the address of a Dask cluster to do
-    that work on instead). When the assembly leaves fragments unplaced (or placed with most
-    of the break open: ``config.segment.retry_below``), the set is segmented again, with
-    the planar mates of its break faces labelled too and then with
+    that work on instead). When the assembly leaves fragments unplaced, the set is
+    segmented again, with the planar mates of its break faces labelled too and then with
     ``config.segment.fallback`` evidence, and matched and assembled again; the assembly
     with most whole-surface contact is kept (:mod:`arbiter`); a set found thin-walled by the
     automatic test (``config.thin_walls`` None) is matched as solids too, kept the same way. With
@@ -122,11 +126,11 @@ def reassemble(
         tried.append(again)
         result = _better(result, again, config=config)
     for retry in retries:
-        unplaced, open_break = _open(result, below=config.segment.retry_below)
-        if not unplaced and not open_break:
+        # another segmentation can only help a fragment that was described and still not placed
+        if not any(not p and f.descriptors is not None for p, f in zip(result.assembly.placed, result.fragments)):
             break
-        log.info("%d of %d fragments unplaced, %d placed with most of the break open: segmenting with %s too",
-                 unplaced, len(result.fragments), open_break, _label(retry))
+        log.info("%d of %d fragments unplaced: segmenting with %s too",
+                 np.count_nonzero(~result.assembly.placed), len(result.fragments), _label(retry))
         again = _match(described, retry, jobs=jobs, scheduler=scheduler, progress=progress, unless=tried,
                        memo=memo)
         if again is None:
@@ -145,16 +149,6 @@ def reassemble(
     if not (sherds and result is tried[0]):  # the sherds' assembly above already asked every partner
         _assemble(result, limit=None, **more)
     return result
-
-
-def _open(result: Result, *, below: float) -> tuple[int, int]:
-    """How many described fragments the assembly left unplaced, and how many it placed with
-    less than ``below`` of their labelled break in contact: those another segmentation
-    can help."""
-    described = np.array([f.descriptors is not None for f in result.fragments])
-    placed = result.assembly.placed
-    return (int(np.count_nonzero(described & ~placed)),
-            int(np.count_nonzero(described & placed & (result.assembly.confidence < below))))
 
 
 def _segmentations(config: Config, n: int) -> tuple[Config, list[Config]]:
@@ -301,7 +295,24 @@ def _assemble(result: Result, *, limit: int | None, jobs: int = 1, scheduler: st
     result.touching = assembly.contact_points(result.assembly, surfaces, meshes, tol=reg.tolerance * size,
                                               normal_angle=reg.normal_angle, count=config.assembly.touching_points,
                                               gap=reg.gap * size)
+    result.fracture = _break_surfaces(result)
     result.timings["assembly"] = result.timings.get("assembly", 0.0) * again + time.perf_counter() - t0
+
+
+def _break_surfaces(result: Result) -> list[np.ndarray]:
+    """Each fragment's fracture faces after the assembly (``Result.fracture``)."""
+    reg, size, a = result.config.registration, result.size, result.assembly
+    touching = assembly.contact_faces(a, [f.mesh for f in result.fragments], tol=reg.tolerance * size,
+                                      gap=reg.gap * size)
+    out = []
+    for k, f in enumerate(result.fragments):
+        seg = f.segmentation
+        together = np.count_nonzero(a.group == a.group[k])
+        if seg is None or together < 2:
+            out.append(np.zeros(len(f.faces), bool) if seg is None else np.asarray(seg.fracture, bool).copy())
+            continue
+        out.append(labels_from_contact(seg, touching[k], keep_open=together < len(a.group)))
+    return out
 
 
 def _load(inputs, out, *, config: Config, seed: int | None, force: bool):

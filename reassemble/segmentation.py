@@ -84,11 +84,6 @@ class SegmentParams:
         with them and tries without
     mate_overlap : the share of either outline on the other, laid together, that makes a
         plane a mate (a clean break's two faces coincide)
-    retry_below : a run segments again (``mates``, then ``fallback``) also when a placed
-        fragment has less than this share of its labelled break in contact
-        (:attr:`assembly.Assembly.confidence`): in a complete set every break is covered by
-        its mate, and one left open was often found on one side only (0: only when
-        fragments are unplaced)
 
     Notes
     -----
@@ -108,7 +103,6 @@ class SegmentParams:
     fallback: str | None = "mixture"
     mates: bool | None = None
     mate_overlap: float = 0.9
-    retry_below: float = 0.5
 
     def __post_init__(self):
         from .errors import ReassembleError
@@ -116,8 +110,6 @@ class SegmentParams:
         for name, value in (("method", self.method), ("fallback", self.method if self.fallback is None else self.fallback)):
             if value not in METHODS:
                 raise ReassembleError(f"segment.{name} must be one of {', '.join(METHODS)} (got {value!r})")
-        if not 0.0 <= self.retry_below <= 1.0:
-            raise ReassembleError(f"segment.retry_below must be between 0 and 1, got {self.retry_below}")
 
 
 @dataclass
@@ -139,6 +131,37 @@ class Segmentation:
     region: np.ndarray
     fracture_area: float
     area: float
+
+
+def labels_from_contact(seg: Segmentation, touching: np.ndarray, *, keep_open: bool) -> np.ndarray:
+    """A placed fragment's fracture labels after the assembly: the faces in contact.
+
+    Parameters
+    ----------
+    seg : the fragment's Segmentation (its labels and regions)
+    touching : (f,) bool, faces touching another fragment of its sub-assembly
+        (:func:`assembly.contact_faces`)
+    keep_open : also keep the labelled fracture regions that touch nothing (a set with
+        fragments outside this one's sub-assembly: their mates may be there)
+
+    Returns
+    -------
+    (f,) bool
+
+    Notes
+    -----
+    A break is where a fragment met its mate, so in an assembly it is the surface in
+    contact, whatever either segmentation said: the complementarity of Huang et al. (2006),
+    applied once the poses are known. Face by face: the segmentation's patches can straddle
+    a break's rim where it meets the surface at a shallow angle. Where the assembly is
+    complete, a labelled region touching nothing has no mate and is original surface.
+    """
+    out = np.asarray(touching, bool).copy()
+    if keep_open:
+        region = seg.region
+        touched = np.unique(region[out & (region >= 0)])
+        out |= np.asarray(seg.fracture, bool) & (region >= 0) & ~np.isin(region, touched)
+    return out
 
 
 def fracture_regions(fracture: np.ndarray, pairs: np.ndarray) -> np.ndarray:

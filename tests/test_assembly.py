@@ -500,7 +500,8 @@ def test_a_wrong_first_merge_is_undone_by_another_start(prepared, puzzle):
 
 
 def _final_common(prepared):
-    """The options :func:`assembly.assemble` refines the 4-piece cow's sub-assemblies with."""
+    """The options :func:`assembly.assemble` verifies the 4-piece cow's refinements with
+    (every sample: the merges' are thinned)."""
     from reassemble import assembly
     from reassemble.config import Config
     from reassemble.geometry import make_scene
@@ -536,13 +537,44 @@ def test_a_refinement_that_loses_contact_is_not_kept(prepared, puzzle, monkeypat
         return out
 
     monkeypatch.setattr(assembly, "refine", pulled)
-    out = assembly._refined(truth, g, params=params, common=common)
+    out = assembly._refined(truth, g, surfaces=common["surfaces"], params=params, common=common)
     assert tried == [tuple(params.refine_levels), tuple(params.refine_levels[-1:])]
     assert np.array_equal(out, truth)
     monkeypatch.undo()
     moved = truth.copy()
     moved[1][:3, 3] += 0.5 * tol * np.array([0.6, 0.0, 0.8])
-    out = assembly._refined(moved, g, params=params, common=common)
+    out = assembly._refined(moved, g, surfaces=common["surfaces"], params=params, common=common)
     c = frags[1].vertices.mean(axis=0)
     offset = lambda T: np.linalg.norm(T[1][:3, :3] @ c + T[1][:3, 3] - truth[1][:3, :3] @ c - truth[1][:3, 3])
     assert offset(out) < 0.2 * offset(moved)
+
+
+def test_the_break_is_the_surface_in_contact(prepared, puzzle):
+    # at the true poses, the faces in contact are the generator's fracture faces, whatever
+    # the segmentation said: even labels inverted everywhere come out right
+    from types import SimpleNamespace
+
+    from reassemble.assembly import Contact, contact_faces
+    from reassemble.geometry import face_areas
+    from reassemble.pairs import registration_params
+    from reassemble.segmentation import labels_from_contact
+
+    frags, size = prepared
+    T = np.array([puzzle.ground_truth["fragments"][f.name]["transform"] for f in frags])
+    n = len(frags)
+    together = SimpleNamespace(contacts=[Contact(p, q, 0.0, 0.0, 0.0) for p in range(n) for q in range(p + 1, n)],
+                               T_group_fragment=T)
+    reg = registration_params(frags, size=size)
+    touching = contact_faces(together, [f.mesh for f in frags], tol=reg.tolerance * size)
+    for k, f in enumerate(frags):
+        truth = puzzle.labels[f.name].astype(bool)
+        area = face_areas(*f.mesh)
+        inverted = SimpleNamespace(fracture=~truth, region=np.where(truth, -1, 0))
+        out = labels_from_contact(inverted, touching[k], keep_open=False)
+        tp = area[out & truth].sum()
+        f1 = 2 * tp / (area[out].sum() + area[truth].sum())
+        assert f1 > 0.99, (f.name, f1)
+    # a fragment with nothing in contact keeps its labelled regions only where asked to
+    alone = SimpleNamespace(fracture=truth, region=np.where(truth, 0, -1))
+    assert not labels_from_contact(alone, np.zeros(len(truth), bool), keep_open=False).any()
+    assert np.array_equal(labels_from_contact(alone, np.zeros(len(truth), bool), keep_open=True), truth)

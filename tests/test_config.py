@@ -51,7 +51,6 @@ def test_set_overrides_one_value_with_its_type():
     ("break.hurst=0.5", "not used by this command"),
     ("segment.method=none", "segment.method must be one of learned, mixture"),
     ("segment.fallback=roughness", "segment.fallback must be one of learned, mixture"),
-    ("segment.retry_below=1.5", "segment.retry_below must be between 0 and 1"),
 ])
 def test_set_errors_are_one_line(setting, message):
     with pytest.raises(ReassembleError, match=message) as err:

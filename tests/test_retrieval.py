@@ -111,25 +111,6 @@ def test_a_candidate_set_starts_with_planar_mates_and_tries_without():
             assert first is fixed and [r.segment.method for r in retries] == [config.segment.fallback]
 
 
-def test_a_set_is_segmented_again_while_a_break_stays_open():
-    # unplaced fragments, and placed ones with most of their labelled break uncovered (a
-    # break found on one side only leaves the other side open), ask for another
-    # segmentation; fragments never described cannot be helped by one
-    from types import SimpleNamespace
-
-    from reassemble.pipeline import _open
-
-    frags = [SimpleNamespace(descriptors=d) for d in ({}, {}, {}, None, {})]
-    assembly = SimpleNamespace(placed=np.array([True, True, False, False, True]),
-                               confidence=np.array([0.9, 0.3, 0.0, 0.0, 0.5]))
-    result = SimpleNamespace(fragments=frags, assembly=assembly)
-    assert _open(result, below=0.5) == (1, 1)
-    assert _open(result, below=0.0) == (1, 0)
-    assembly.placed[2] = True
-    assembly.confidence[2] = 0.8
-    assert _open(result, below=0.2) == (0, 0)
-
-
 def test_large_sets_register_candidate_pairs_by_default():
     from reassemble.retrieval import candidates_only
 

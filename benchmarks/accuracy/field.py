@@ -15,9 +15,10 @@ defaults, ``--timeout`` per puzzle, ``--results DIR`` keeps bench's resumable
 ``results.jsonl``) and is scored as ``reassemble eval`` does, anchored on the largest placed
 fragment: strict part accuracy (mean chamfer under 1 % of the diagonal) and solved (every
 fragment strict-correct). The segmentation F1 is area-weighted over the puzzle's faces, the
-run's own fracture labels (those of its ``analysis.npz``) against the generator's exact
-ones, computed in the puzzle's process by bench's ``extra`` hook
-(:func:`segmentation_scores`). Time per fragment: wall-clock of reading and solving (not of
+run's own fracture labels (``fracture_k`` of its ``analysis.npz``: after the assembly)
+against the generator's exact ones, computed in the puzzle's process by bench's ``extra``
+hook (:func:`segmentation_scores`); "F1 segmented" scores the segmentation's labels the
+run matched with (``segmented_k``), before the assembly. Time per fragment: wall-clock of reading and solving (not of
 scoring) and the CPU time of solving, over the puzzle's fragments. ``--baseline`` also runs
 Open3D's textbook FPFH + RANSAC + ICP (``reassemble.baseline``, its own pool of processes,
 not bench: it is not ``run``'s pipeline) on the puzzles of at most ``--baseline-max-pieces``.
@@ -97,7 +98,11 @@ def segmentation_scores(*, bench_set, meshes: dict, predicted: dict) -> dict:
     from reassemble.puzzle import read_puzzle
 
     puzzle = read_puzzle(Path(bench_set.path) / "ground_truth.json")
-    return segmentation_f1(meshes, {n: p["fracture"] for n, p in predicted.items() if "fracture" in p}, puzzle)
+    out = segmentation_f1(meshes, {n: p["fracture"] for n, p in predicted.items() if "fracture" in p}, puzzle)
+    segmented = {n: p["segmented"] for n, p in predicted.items() if "segmented" in p}
+    if segmented:  # the segmentation's own labels, before the assembly refined them
+        out["segmented_f1"] = segmentation_f1(meshes, segmented, puzzle)["f1"]
+    return out
 
 
 def field_solver(meshes: dict, *, config) -> tuple[dict, dict]:
@@ -117,7 +122,8 @@ def row(rec: dict) -> dict:
         # known (it may have been killed): the wall-clock of its single-threaded solve stands in
         spent = float(rec.get("time_s") or 0.0)
         return {"name": rec["set"], "error": rec["error"], "fragments": rec["pieces"], "time": spent, "cpu": spent,
-                "part_acc_strict": 0.0, "solved": False, "f1": 0.0, "precision": 0.0, "recall": 0.0, "placed": 0}
+                "part_acc_strict": 0.0, "solved": False, "f1": 0.0, "precision": 0.0, "recall": 0.0, "placed": 0,
+                "segmented_f1": 0.0}
     s, t = rec["metrics"][ALIGN], rec["timings_s"]
     return {"name": rec["set"], "time": t["load"] + t["solve"], "cpu": rec["solver"]["cpu_s"],
             "fragments": rec["pieces"], "placed": rec["placed"], "part_acc_strict": s["part_acc_strict"],
@@ -137,6 +143,8 @@ def _group(rows: list[dict]) -> dict:
     frags = sum(r["fragments"] for r in rows)
     g = {"puzzles": len(rows), "fragments": frags,
          "f1": float(np.mean([r["f1"] for r in rows])),
+         "segmented_f1": (float(np.mean([r["segmented_f1"] for r in rows]))
+                          if all("segmented_f1" in r for r in rows) else None),
          "part_acc_strict": float(np.mean([r["part_acc_strict"] for r in rows])),
          "solved": float(np.mean([r["solved"] for r in rows])),
          "s_per_fragment": float(sum(r["time"] for r in rows) / frags),
@@ -199,7 +207,7 @@ def print_tables(figs: dict) -> None:
 
 def tables(figs: dict) -> list[dict]:
     """The record's tables: per noise level, by style and by mesh kind, validation first."""
-    cols = ["n", "F1", "strict", "solved", "cpu s/fragment"]
+    cols = ["n", "F1", "F1 segmented", "strict", "solved", "cpu s/fragment"]
     out = []
     for noise in ("clean", "noisy"):
         for block in ("all", "by_style", "by_kind"):
@@ -213,13 +221,13 @@ def tables(figs: dict) -> list[dict]:
                 row = [k]
                 for h in halves:
                     g = figs[h][noise]["all"] if block == "all" else figs[h][noise][block].get(k)
-                    row += ([g["puzzles"], g["f1"], g["part_acc_strict"], g["solved"], g["cpu_s_per_fragment"]]
-                            if g and g.get("puzzles") else [None] * 5)
+                    row += ([g["puzzles"], g["f1"], g.get("segmented_f1"), g["part_acc_strict"], g["solved"],
+                             g["cpu_s_per_fragment"]] if g and g.get("puzzles") else [None] * 6)
                 b = (figs[halves[0]][noise]["all"] if block == "all" else figs[halves[0]][noise][block].get(k) or {})
                 row.append(b.get("baseline", {}).get("part_acc_strict"))
                 rows.append(row)
             columns = ["group"] + [f"{h} {c}" for h in halves for c in cols] + [f"{halves[0]} FPFH strict"]
-            formats = [""] + ["d", ".3f", ".3f", ".2f", ".1f"] * len(halves) + [".3f"]
+            formats = [""] + ["d", ".3f", ".3f", ".3f", ".2f", ".1f"] * len(halves) + [".3f"]
             title = f"Field set, {noise}, {'all puzzles' if block == 'all' else block.replace('_', ' ')}"
             out.append(table(title, columns, rows, formats))
     return out

@@ -7,7 +7,8 @@ folder ``reassemble run`` wrote for it (``analysis.npz``, ``pairs.json``, ``repo
 Per fragment: its sub-assembly in the report and the area-weighted precision, recall and F1
 of the run's fracture labels against the generator's (``segmentation_f1`` of the field
 benchmark). Per pair of fragments that touch in the ground truth (largest contact first):
-whether the pair was registered, where the true placement ranks among its candidates
+the recall of each side's labels on the faces of their contact, whether the pair was
+registered, where the true placement ranks among its candidates
 (within 5 degrees, and 2 % of the diagonal at the source's centre) with its score, and the
 best score. A true pair with no true candidate and a low recall on either side had no
 keypoints to meet.
@@ -26,6 +27,7 @@ from benchmarks.common import add_json_option, start, table
 
 ANGLE_DEG = 5.0  # a candidate within this of the true rotation ...
 OFFSET = 0.02  # ... and this fraction of the diagonal of its translation is the true placement
+SIDE = 0.01  # a true break face within this fraction of the diagonal of the other's is on their contact
 
 
 def true_rank(candidates: list[dict], T_target_source: np.ndarray, centre: np.ndarray,
@@ -39,6 +41,29 @@ def true_rank(candidates: list[dict], T_target_source: np.ndarray, centre: np.nd
         if rotation < ANGLE_DEG and offset < OFFSET:
             return i, float(c["score"])
     return None, None
+
+
+def side_recall(files, labels: dict, T_world: dict, diagonal: float, a: str, b: str) -> float | None:
+    """Area-weighted recall of ``a``'s run labels (``labels[a]``, per face) on the part of
+    its true break that meets ``b``'s (face centres within ``SIDE`` of the diagonal of b's
+    true break faces, at the true poses); None when they do not meet."""
+    from scipy.spatial import cKDTree
+
+    from reassemble.geometry import face_areas, transform_points
+
+    def break_centres(n):
+        m = files.meshes[n]
+        return transform_points(T_world[n], m.vertices[m.faces].mean(axis=1)), files.labels[n].astype(bool)
+
+    ca, truth = break_centres(a)
+    cb, truth_b = break_centres(b)
+    if not truth_b.any():
+        return None
+    near = truth & (cKDTree(cb[truth_b]).query(ca)[0] < SIDE * diagonal)
+    area = face_areas(files.meshes[a].vertices, files.meshes[a].faces)
+    if not near.any():
+        return None
+    return float(area[near & np.asarray(labels[a], bool)].sum() / area[near].sum())
 
 
 def study(puzzle: Path, run: Path, *, fragments: list[str] | None = None) -> dict:
@@ -57,6 +82,7 @@ def study(puzzle: Path, run: Path, *, fragments: list[str] | None = None) -> dic
     group = {n: g for g, members in enumerate(report["groups"]) for n in members}
     meshes, _ = load_fragments([puzzle / "fragments" / f"{n}.ply" for n in keep])
     rows = []
+    labels = {n: analysis[f"fracture_{names.index(n)}"] for n in names}
     for n in keep:
         s = segmentation_f1({n: meshes[n]}, {n: analysis[f"fracture_{names.index(n)}"]}, files)
         rows.append({"fragment": n, "group": group.get(n), **s})
@@ -69,7 +95,7 @@ def study(puzzle: Path, run: Path, *, fragments: list[str] | None = None) -> dic
             continue
         p = pairs.get((a, b))
         row = {"pair": f"{a} {b}", "area": c["area"], "registered": p is not None, "rank": None, "score": None,
-               "best": None}
+               "best": None, "recall": [side_recall(files, labels, T_world, diagonal, x, y) for x, y in ((a, b), (b, a))]}
         if p is not None and p["candidates"]:
             T = np.linalg.inv(T_world[p["target"]]) @ T_world[p["source"]]
             centre = files.meshes[p["source"]].vertices.mean(axis=0)
@@ -89,21 +115,24 @@ def main() -> int:
     bench = start()
     r = study(args.puzzle, args.run, fragments=args.fragments.split(",") if args.fragments else None)
     frag_rows = [[f["fragment"], f["group"], f["precision"], f["recall"], f["f1"]] for f in r["fragments"]]
-    pair_rows = [[c["pair"], c["area"], "yes" if c["registered"] else "no", "-" if c["rank"] is None else c["rank"],
+    pair_rows = [[c["pair"], c["area"], " / ".join("-" if x is None else f"{x:.2f}" for x in c["recall"]),
+                  "yes" if c["registered"] else "no", "-" if c["rank"] is None else c["rank"],
                   "-" if c["score"] is None else f"{c['score']:.3f}", "-" if c["best"] is None else f"{c['best']:.3f}"]
                  for c in r["contacts"]]
     for row in frag_rows:
         print(f"{row[0]}: sub-assembly {row[1]}, fracture labels P {row[2]:.2f} R {row[3]:.2f} F1 {row[4]:.2f}")
     for row in pair_rows:
-        print(f"{row[0]}: contact {row[1]:.4f}, registered {row[2]}, true placement ranks {row[3]} "
-              f"(score {row[4]}), best {row[5]}")
+        print(f"{row[0]}: contact {row[1]:.4f}, recall on each side {row[2]}, registered {row[3]}, "
+              f"true placement ranks {row[4]} (score {row[5]}), best {row[6]}")
     bench.write(args.json, figures=r, tables=[
         table(f"{r['puzzle']}: the run's fracture labels per fragment", ["fragment", "sub-assembly", "precision",
                                                                           "recall", "F1"], frag_rows,
               ["", "d", ".2f", ".2f", ".2f"]),
         table(f"{r['puzzle']}: true contacts, largest first; where the true placement ranks among the pair's "
-              "candidates", ["pair", "contact area", "registered", "true rank", "its score", "best score"], pair_rows,
-              ["", ".4f", "", "", "", ""])])
+              "candidates; recall of each side's labels on the contact", ["pair", "contact area", "recall a / b",
+                                                                          "registered", "true rank", "its score",
+                                                                          "best score"], pair_rows,
+              ["", ".4f", "", "", "", "", ""])])
     return 0
 
 

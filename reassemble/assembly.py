@@ -466,7 +466,11 @@ def assemble(
                                memo=GroupMemo() if memo is None else memo)
     for g in members.values():
         if len(g) > 1:
-            poses[g] = _refined(poses[g], g, surfaces=surfaces, params=params, common=common)
+            poses[g] = refine(poses[g], [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
+                              iterations=params.refine_iterations, max_iterations=params.refine_max_iterations,
+                              stop=params.refine_stop, anchor=int(np.argmax(areas[g])),
+                              levels=params.refine_levels, n_points=params.refine_samples, gap=gap,
+                              rim_reach=params.rim_reach, rim_weight=params.rim_weight)
 
     # contacts at the final poses, and the groups renumbered by area
     contacts = []
@@ -489,41 +493,6 @@ def assemble(
     fracture = np.array([s.fracture_area for s in surfaces])
     confidence = np.where(fracture > 0, np.minimum(1.0, touching / np.maximum(fracture, 1e-300)), 0.0)
     return Assembly(poses, group, placed, confidence, contacts, merges)
-
-
-def _refined(T_group_fragment: np.ndarray, g: list[int], *, surfaces: list[FractureSurface],
-             params: AssemblyParams, common: dict) -> np.ndarray:
-    """The poses of the sub-assembly ``g`` after :func:`refine` (on ``surfaces``), unless
-    refining lowers its verified total (:func:`_total`, on the merges' samples and cache):
-    then refined at the finest level alone, and the merged poses kept when that lowers it
-    too.
-
-    Notes
-    -----
-    The merges place each fragment at a verified pairwise placement; refinement is there
-    to close the small misfits of loops, and its coarse level matches surfaces up to twice
-    the tolerance apart. Where two breaks that do not touch lie that close (three pieces
-    meeting along an edge), it pulls them into contact and a fragment off its true mate.
-    Contact is what the refinement should add; a result with less is not kept.
-    """
-    reg_params, tol, gap = common["reg_params"], common["tol"], common["gap"]
-    group = np.full(len(common["surfaces"]), -1)
-    group[g] = 0
-    poses = np.tile(np.eye(4), (len(group), 1, 1))
-
-    def total(T):
-        poses[g] = T
-        return _total((group, poses, {0: list(g)}), **common)
-
-    best_total = total(T_group_fragment)
-    for levels in dict.fromkeys([tuple(params.refine_levels), tuple(params.refine_levels[-1:])]):
-        T = refine(T_group_fragment, [surfaces[k] for k in g], tol=tol, normal_angle=reg_params.normal_angle,
-                   iterations=params.refine_iterations, max_iterations=params.refine_max_iterations,
-                   stop=params.refine_stop, anchor=int(np.argmax(common["areas"][g])), levels=levels,
-                   n_points=params.refine_samples, gap=gap, rim_reach=params.rim_reach, rim_weight=params.rim_weight)
-        if total(T) >= best_total:
-            return T
-    return T_group_fragment
 
 
 def _register_groups(proposals, state, *, surfaces, meshes, size, tol, gap, params, reg_params, seed, common,

@@ -499,56 +499,6 @@ def test_a_wrong_first_merge_is_undone_by_another_start(prepared, puzzle):
                for i in range(n) for j in range(n))
 
 
-def _final_common(prepared):
-    """The options :func:`assembly.assemble` verifies the 4-piece cow's refinements with
-    (every sample: the merges' are thinned)."""
-    from reassemble import assembly
-    from reassemble.config import Config
-    from reassemble.geometry import make_scene
-    from reassemble.pairs import registration_params
-
-    frags, size = prepared
-    reg = registration_params(frags, size=size)
-    surfaces = [f.surface for f in frags]
-    centres, radii = assembly._spheres(surfaces)
-    return dict(surfaces=surfaces, scenes=[make_scene(*f.mesh) for f in frags],
-                areas=np.array([s.area for s in surfaces]), tol=reg.tolerance * size,
-                reach=reg.ransac_tolerance * size, params=Config().assembly, reg_params=reg, centres=centres,
-                radii=radii, cache={}, gap=0.0)
-
-
-def test_a_refinement_that_loses_contact_is_not_kept(prepared, puzzle, monkeypatch):
-    # where the coarse level pulls a fragment off its mate (breaks that lie close without
-    # touching), the verified total drops; the finest level alone is tried, then the merged
-    # poses are kept. A refinement that adds contact is kept.
-    from reassemble import assembly
-
-    frags, size = prepared
-    common = _final_common(prepared)
-    params, tol = common["params"], common["tol"]
-    truth = np.array([puzzle.ground_truth["fragments"][f.name]["transform"] for f in frags])
-    g = list(range(len(frags)))
-    tried = []
-
-    def pulled(T, surfaces, *, levels, **_):
-        tried.append(levels)
-        out = T.copy()
-        out[1][:3, 3] += 5.0 * tol * np.array([0.6, 0.0, 0.8])
-        return out
-
-    monkeypatch.setattr(assembly, "refine", pulled)
-    out = assembly._refined(truth, g, surfaces=common["surfaces"], params=params, common=common)
-    assert tried == [tuple(params.refine_levels), tuple(params.refine_levels[-1:])]
-    assert np.array_equal(out, truth)
-    monkeypatch.undo()
-    moved = truth.copy()
-    moved[1][:3, 3] += 0.5 * tol * np.array([0.6, 0.0, 0.8])
-    out = assembly._refined(moved, g, surfaces=common["surfaces"], params=params, common=common)
-    c = frags[1].vertices.mean(axis=0)
-    offset = lambda T: np.linalg.norm(T[1][:3, :3] @ c + T[1][:3, 3] - truth[1][:3, :3] @ c - truth[1][:3, 3])
-    assert offset(out) < 0.2 * offset(moved)
-
-
 def test_the_break_is_the_surface_in_contact(prepared, puzzle):
     # at the true poses, the faces in contact are the generator's fracture faces, whatever
     # the segmentation said: even labels inverted everywhere come out right

@@ -25,7 +25,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .features import FractureSurface, same_surface
-from .geometry import farthest_points, invert_transform, make_scene, rotation_from_vector, transform_points
+from .geometry import (face_normals, farthest_points, invert_transform, make_scene, rotation_from_vector,
+                       transform_points)
 from .parallel import pool_map, worker_state
 from .registration import RegistrationParams, contact_score, opposed_neighbours, rim_pairs, touching_samples
 
@@ -831,8 +832,6 @@ def contact_faces(
     (f,) bool per fragment, over its faces
     """
     import open3d as o3d
-
-    from .geometry import face_normals
 
     out = [np.zeros(len(f), bool) for _, f in meshes]
     scenes: dict = {}

@@ -399,8 +399,10 @@ def _add_eval(sub) -> None:
         "Euler RMSE, translation RMSE, shape chamfer), strict part accuracy and geodesic "
         "rotation error, with the prediction as given and anchored on one fragment.",
     )
-    p.add_argument("predicted", type=Path, help="transforms.json (convention T_world_fragment), or the folder `run` wrote it to")
-    p.add_argument("ground_truth", type=Path, help="ground_truth.json of the puzzle (fragments/ beside it), or the puzzle's folder")
+    p.add_argument("predicted", type=Path,
+                   help="transforms.json (convention T_world_fragment), or the folder `run` wrote it to")
+    p.add_argument("ground_truth", type=Path,
+                   help="ground_truth.json of the puzzle (fragments/ beside it), or the puzzle's folder")
     p.add_argument("--json", action="store_true", help="print the full report as JSON")
     p.add_argument("--out", type=Path, help="also write the full report to this JSON file")
     scoring = inspect.signature(evaluate_files).parameters

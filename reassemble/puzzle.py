@@ -142,8 +142,8 @@ def evaluate_files(
     ``ground_truth.json`` (or the puzzle's folder)."""
     predicted, ground_truth = file_in(predicted, "transforms.json"), file_in(ground_truth, "ground_truth.json")
     pred = read_transforms(predicted)
+    puzzle = read_puzzle(ground_truth, with_labels=False)  # first: its errors name a ground truth
     truth = read_transforms(ground_truth)
-    puzzle = read_puzzle(ground_truth, with_labels=False)
     fragments = [
         ScoringFragment(name, m.vertices, m.faces, truth[name]["transform"])
         for name, m in sorted(puzzle.meshes.items())

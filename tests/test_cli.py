@@ -62,6 +62,8 @@ def test_break_then_eval(tmp_path):
     assert "1.000" in out
     rc, out, err = run("eval", tmp_path / "p" / "fragments", tmp_path / "p")
     assert_one_line_error(rc, err, "transforms.json", "no such file")
+    rc, out, err = run("eval", tmp_path, tmp_path / "p" / "fragments")
+    assert_one_line_error(rc, err, "ground_truth.json", "no such file", "expected a ground_truth.json")
 
 
 def test_existing_output_is_refused_then_replaced_with_force(tmp_path):

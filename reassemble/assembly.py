@@ -835,16 +835,19 @@ def contact_faces(
 
     out = [np.zeros(len(f), bool) for _, f in meshes]
     scenes: dict = {}
+    faces: dict = {}  # per fragment: its face centres and normals, in its own frame
     for c in assembly.contacts:
         for p, q in ((c.a, c.b), (c.b, c.a)):
             if q not in scenes:
                 scenes[q] = make_scene(*meshes[q])
-            v, f = meshes[p]
+            if p not in faces:
+                v, f = meshes[p]
+                faces[p] = v[f].mean(axis=1), face_normals(v, f)
             T_q_p = invert_transform(assembly.T_group_fragment[q]) @ assembly.T_group_fragment[p]
-            centres = transform_points(T_q_p, v[f].mean(axis=1))
+            centres = transform_points(T_q_p, faces[p][0])
             closest = scenes[q].compute_closest_points(o3d.core.Tensor(centres.astype(np.float32)))
             dist = np.linalg.norm(closest["points"].numpy().astype(np.float64) - centres, axis=1)
-            facing = (np.einsum("ij,ij->i", face_normals(v, f) @ T_q_p[:3, :3].T, closest["primitive_normals"].numpy())
+            facing = (np.einsum("ij,ij->i", faces[p][1] @ T_q_p[:3, :3].T, closest["primitive_normals"].numpy())
                       < -np.cos(np.radians(normal_angle)))
             out[p] |= (np.abs(dist - gap) < tol) & facing
     return out

@@ -18,8 +18,9 @@ fragment strict-correct). The segmentation F1 is area-weighted over the puzzle's
 run's own fracture labels (``fracture_k`` of its ``analysis.npz``: after the assembly)
 against the generator's exact ones, computed in the puzzle's process by bench's ``extra``
 hook (:func:`segmentation_scores`); "F1 segmented" scores the segmentation's labels the
-run matched with (``segmented_k``), before the assembly. Time per fragment: wall-clock of reading and solving (not of
-scoring) and the CPU time of solving, over the puzzle's fragments. ``--baseline`` also runs
+run matched with (``segmented_k``), before the assembly. Time per fragment: wall-clock of
+reading and solving (not of scoring) and the CPU time of solving, over the puzzle's
+fragments. ``--baseline`` also runs
 Open3D's textbook FPFH + RANSAC + ICP (``reassemble.baseline``, its own pool of processes,
 not bench: it is not ``run``'s pipeline) on the puzzles of at most ``--baseline-max-pieces``.
 Figures go to ``benchmarks/results/field.json`` (a benchmark record,

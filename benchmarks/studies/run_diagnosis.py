@@ -5,7 +5,8 @@
 PUZZLE is a folder with ground_truth.json, labels.npz and fragments/; RUN is the output
 folder ``reassemble run`` wrote for it (``analysis.npz``, ``pairs.json``, ``report.json``).
 Per fragment: its sub-assembly in the report and the area-weighted precision, recall and F1
-of the run's fracture labels against the generator's (``segmentation_f1`` of the field
+of the run's segmentation (``segmented_k`` of ``analysis.npz``, the labels its matching
+used; ``fracture_k`` of runs that wrote no ``segmented_k``) against the generator's (``segmentation_f1`` of the field
 benchmark). Per pair of fragments that touch in the ground truth (largest contact first):
 the recall of each side's labels on the faces of their contact, whether the pair was
 registered, where the true placement ranks among its candidates
@@ -43,24 +44,28 @@ def true_rank(candidates: list[dict], T_target_source: np.ndarray, centre: np.nd
     return None, None
 
 
-def side_recall(files, labels: dict, T_world: dict, diagonal: float, a: str, b: str) -> float | None:
-    """Area-weighted recall of ``a``'s run labels (``labels[a]``, per face) on the part of
-    its true break that meets ``b``'s (face centres within ``SIDE`` of the diagonal of b's
-    true break faces, at the true poses); None when they do not meet."""
-    from scipy.spatial import cKDTree
-
+def _true_breaks(files, T_world: dict) -> dict:
+    """Per fragment: its faces' centres at the true pose, its generator labels and face areas."""
     from reassemble.geometry import face_areas, transform_points
 
-    def break_centres(n):
-        m = files.meshes[n]
-        return transform_points(T_world[n], m.vertices[m.faces].mean(axis=1)), files.labels[n].astype(bool)
+    out = {}
+    for n, m in files.meshes.items():
+        out[n] = (transform_points(T_world[n], m.vertices[m.faces].mean(axis=1)), files.labels[n].astype(bool),
+                  face_areas(m.vertices, m.faces))
+    return out
 
-    ca, truth = break_centres(a)
-    cb, truth_b = break_centres(b)
+
+def side_recall(breaks: dict, labels: dict, diagonal: float, a: str, b: str) -> float | None:
+    """Area-weighted recall of ``a``'s run labels (``labels[a]``, per face) on the part of
+    its true break that meets ``b``'s (face centres within ``SIDE`` of the diagonal of b's
+    true break faces, at the true poses; ``breaks`` from :func:`_true_breaks`); None when
+    they do not meet."""
+    from scipy.spatial import cKDTree
+
+    (ca, truth, area), (cb, truth_b, _) = breaks[a], breaks[b]
     if not truth_b.any():
         return None
     near = truth & (cKDTree(cb[truth_b]).query(ca)[0] < SIDE * diagonal)
-    area = face_areas(files.meshes[a].vertices, files.meshes[a].faces)
     if not near.any():
         return None
     return float(area[near & np.asarray(labels[a], bool)].sum() / area[near].sum())
@@ -82,9 +87,12 @@ def study(puzzle: Path, run: Path, *, fragments: list[str] | None = None) -> dic
     group = {n: g for g, members in enumerate(report["groups"]) for n in members}
     meshes, _ = load_fragments([puzzle / "fragments" / f"{n}.ply" for n in keep])
     rows = []
-    labels = {n: analysis[f"fracture_{names.index(n)}"] for n in names}
+    # the labels the matching used (a newer run's fracture_k are those after the assembly)
+    key = "segmented" if "segmented_0" in analysis.files else "fracture"
+    labels = {n: analysis[f"{key}_{k}"] for k, n in enumerate(names)}
+    breaks = _true_breaks(files, T_world)
     for n in keep:
-        s = segmentation_f1({n: meshes[n]}, {n: analysis[f"fracture_{names.index(n)}"]}, files)
+        s = segmentation_f1({n: meshes[n]}, {n: labels[n]}, files)
         rows.append({"fragment": n, "group": group.get(n), **s})
     pairs = {tuple(sorted((p["source"], p["target"]))): p
              for p in json.loads((run / "pairs.json").read_text())["pairs"]}
@@ -95,7 +103,7 @@ def study(puzzle: Path, run: Path, *, fragments: list[str] | None = None) -> dic
             continue
         p = pairs.get((a, b))
         row = {"pair": f"{a} {b}", "area": c["area"], "registered": p is not None, "rank": None, "score": None,
-               "best": None, "recall": [side_recall(files, labels, T_world, diagonal, x, y) for x, y in ((a, b), (b, a))]}
+               "best": None, "recall": [side_recall(breaks, labels, diagonal, x, y) for x, y in ((a, b), (b, a))]}
         if p is not None and p["candidates"]:
             T = np.linalg.inv(T_world[p["target"]]) @ T_world[p["source"]]
             centre = files.meshes[p["source"]].vertices.mean(axis=0)

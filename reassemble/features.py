@@ -57,7 +57,8 @@ class FractureSurface:
     keypoint_tangents : (k, 3) break tangents at the keypoints of a thin-walled fragment
         (:func:`shells.strip_frames`; sign arbitrary), None for solids
     surface_normals : (p, 3) face normals at the whole-surface samples, None where unknown
-    surface_original : (p,) bool, whole-surface samples on faces not labelled fracture, None
+    surface_original : (p,) bool, whole-surface samples on faces not labelled fracture (of a
+        fragment matched by its whole surface: that the evidence found original), None
         where unknown (both for :func:`registration.seam_continuity`)
     rim : (r, 3) points on the rim, the mesh edges between fracture and original faces (their
         midpoints), None where unknown (:func:`rim_points`)
@@ -247,7 +248,8 @@ def fracture_surface(
         fracture_area=frac_area,
         area=total,
         surface_normals=face_normals(vertices, faces)[on_face],
-        surface_original=~np.asarray(segmentation.fracture, bool)[on_face],
+        surface_original=(~np.asarray(segmentation.fracture, bool) if segmentation.original is None
+                          else np.asarray(segmentation.original, bool))[on_face],
         rim=rim,
         rim_directions=rim_directions,
     )

@@ -43,19 +43,20 @@ class PairMemo:
     fragments' matched surfaces (:class:`features.FractureSurface`) are unchanged would be
     registered exactly as before (same surfaces, meshes, options and the pair's own random
     stream), so its result is taken from here instead. Entries are keyed by the pair and the
-    options and checked against both surfaces, array by array.
+    options and checked against both surfaces, array by array; every segmentation's are
+    kept (a later retry may start again from an earlier one's labels).
     """
 
-    entries: dict = field(default_factory=dict)  # (i, j, params) -> (surface i, surface j, PairResult)
+    entries: dict = field(default_factory=dict)  # (i, j, params) -> [(surface i, surface j, PairResult)]
 
     def get(self, i: int, j: int, params, surfaces: list):
-        hit = self.entries.get((i, j, params))
-        if hit is None or not (same_surface(hit[0], surfaces[i]) and same_surface(hit[1], surfaces[j])):
-            return None
-        return hit[2]
+        for a, b, result in self.entries.get((i, j, params), ()):
+            if same_surface(a, surfaces[i]) and same_surface(b, surfaces[j]):
+                return result
+        return None
 
     def put(self, i: int, j: int, params, surfaces: list, result) -> None:
-        self.entries[(i, j, params)] = (surfaces[i], surfaces[j], result)
+        self.entries.setdefault((i, j, params), []).append((surfaces[i], surfaces[j], result))
 
 
 def _pair_worker_init(surfaces, meshes, size, params) -> None:

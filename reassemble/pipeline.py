@@ -138,9 +138,12 @@ def reassemble(
         _assemble(again, limit=config.retrieval.max_partners, **more)
         tried.append(again)
         result = _better(result, again, config=config)
+    if config.segment.whole_retry and not result.config.thin_walls and result.votes is None:
+        result = _whole_surfaces(described, result, config=config, tried=tried, **more)
     if result is not tried[0] or first is not config:
         # what config.json records: this segmentation, with no retries (--config reproduces the run)
-        segment = dataclasses.replace(result.config.segment, mates=bool(result.config.segment.mates), fallback=None)
+        segment = dataclasses.replace(result.config.segment, mates=bool(result.config.segment.mates), fallback=None,
+                                      whole_retry=False)
         result.config = dataclasses.replace(result.config, segment=segment)
     if len(tried) > 1:
         result.timings = {**tried[0].timings, "fallback": time.perf_counter() - t0}
@@ -182,8 +185,33 @@ def _segmentations(config: Config, n: int) -> tuple[Config, list[Config]]:
     return first, out
 
 
+def _whole_surfaces(described: DescribedSet, result: Result, *, config: Config, tried: list[Result], jobs: int,
+                    scheduler: str | None, progress: bool, memo: PairMemo, groups: assembly.GroupMemo) -> Result:
+    """The whole-surface retry (``segment.whole_retry``): each fragment ``result`` leaves
+    unplaced, largest first, matched by its whole surface (``segment.whole``) beside the
+    others' labels, and the set assembled again; the assembly with more whole-surface
+    contact is kept (:mod:`arbiter`). Only the pairs of the relabelled fragment are
+    registered again (``memo``). Each assembly tried is appended to ``tried``."""
+    areas = [f.surface.area for f in result.fragments]
+    for k in sorted(range(len(areas)), key=lambda k: (-areas[k], k)):
+        if result.assembly.placed[k] or result.fragments[k].descriptors is None:
+            continue
+        segment = result.config.segment
+        whole = tuple(sorted({*(segment.whole or ()), described.names[k]}))
+        log.info("%s unplaced: matching it by its whole surface", described.names[k])
+        asked = dataclasses.replace(config, thin_walls=False, segment=dataclasses.replace(segment, whole=whole))
+        again = _match(described, asked, jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)
+        _assemble(again, limit=config.retrieval.max_partners, jobs=jobs, scheduler=scheduler, progress=progress,
+                  memo=memo, groups=groups)
+        tried.append(again)
+        result = _better(result, again, config=config)
+    return result
+
+
 def _label(config: Config) -> str:
-    return ("sherds" if config.thin_walls else config.segment.method) + ("+mates" if config.segment.mates else "")
+    seg = config.segment
+    return (("sherds" if config.thin_walls else seg.method) + ("+mates" if seg.mates else "")
+            + (f"+whole:{','.join(seg.whole)}" if seg.whole else ""))
 
 
 def _better(first: Result, second: Result, *, config: Config) -> Result:

@@ -23,7 +23,7 @@ from .mates import relabel_planar_mates
 from .parallel import pool_map
 from .registration import with_noise
 from .retrieval import candidates_only
-from .segmentation import Segmentation, segment
+from .segmentation import Segmentation, all_fracture, segment
 from .shells import is_thin_shell, strip_frames, strip_segmentation, wall_thickness
 from .surface_mates import relabel_surface_mates
 
@@ -182,7 +182,8 @@ def segment_set(described: DescribedSet, thickness: dict[int, np.ndarray], *, co
 
     Sherds (``config.thin_walls``, or None and most fragments are) are segmented along
     their break strips (:func:`shells.strip_segmentation`), solids all together
-    (:func:`segmentation.segment`); ``thickness``: wall thickness of each described fragment;
+    (:func:`segmentation.segment`), those named in ``config.segment.whole`` then labelled
+    fracture all over; ``thickness``: wall thickness of each described fragment;
     ``jobs``, ``scheduler``: where planar mates are compared (:func:`mates.relabel_planar_mates`).
     """
     matched, faces = described.matched, [f for _, f in described.meshes]
@@ -202,6 +203,12 @@ def segment_set(described: DescribedSet, thickness: dict[int, np.ndarray], *, co
             segs[k] = s
         if config.segment.mates and good:
             segs = _with_mates(described, segs, good, config=config, seed=seed, jobs=jobs, scheduler=scheduler)
+        whole = set(config.segment.whole or ())
+        for name in sorted(whole - set(described.names)):
+            log.warning("segment.whole: no fragment named %s in the set", name)
+        for k in good:
+            if described.names[k] in whole:
+                segs[k] = all_fracture(segs[k])
     return segs, bool(shell)
 
 

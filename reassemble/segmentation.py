@@ -84,6 +84,13 @@ class SegmentParams:
         with them and tries without
     mate_overlap : the share of either outline on the other, laid together, that makes a
         plane a mate (a clean break's two faces coincide)
+    whole : fragments (by name) matched by their whole surface, every face a possible
+        break, whatever the evidence says (:func:`all_fracture`); None: none
+    whole_retry : when a run's assembly leaves fragments unplaced after every segmentation,
+        match each of them by its whole surface (``whole``), one at a time, largest first,
+        and keep the assembly with more whole-surface contact (:mod:`arbiter`): a fragment
+        whose break the evidence missed has no keypoint on it and finds no pair, while its
+        mates' sides of the break may well have been found
 
     Notes
     -----
@@ -103,6 +110,8 @@ class SegmentParams:
     fallback: str | None = "mixture"
     mates: bool | None = None
     mate_overlap: float = 0.9
+    whole: tuple[str, ...] | None = None
+    whole_retry: bool = True
 
     def __post_init__(self):
         from .errors import ReassembleError
@@ -123,6 +132,8 @@ class Segmentation:
     patch : (f,) int, patch index per face
     region : (f,) int, fracture region per face (connected fracture faces), -1 on original
     fracture_area, area : float, fracture and total surface area
+    original : (f,) bool, the faces the evidence found original, where the labels say
+        otherwise (:func:`all_fracture`); None: ``~fracture``
     """
 
     fracture: np.ndarray
@@ -131,6 +142,16 @@ class Segmentation:
     region: np.ndarray
     fracture_area: float
     area: float
+    original: np.ndarray | None = None
+
+
+def all_fracture(seg: Segmentation) -> Segmentation:
+    """``seg`` with every face labelled fracture, as one region (``SegmentParams.whole``);
+    what the evidence found original is kept as ``original``, for the seams."""
+    n = len(seg.fracture)
+    original = ~np.asarray(seg.fracture, bool) if seg.original is None else seg.original
+    return Segmentation(np.ones(n, bool), seg.probability, seg.patch, np.zeros(n, int), seg.area, seg.area,
+                        original)
 
 
 def labels_from_contact(seg: Segmentation, touching: np.ndarray, *, keep_open: bool) -> np.ndarray:

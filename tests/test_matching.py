@@ -291,6 +291,9 @@ def test_a_retry_registers_again_only_the_pairs_of_changed_fragments(prepared):
         for x, y in zip(again[pair].candidates, fresh[pair].candidates):
             assert np.array_equal(x.T_target_source, y.T_target_source) and x.score == y.score
     assert again[(0, 2)] is not first[(0, 2)]
+    # back to the first surfaces (a later retry from an earlier segmentation's labels): all kept
+    back = match_pairs(frags, size=size, pairs=pairs, seed=3, memo=memo)
+    assert all(back[pair] is first[pair] for pair in pairs)
 
 
 def test_inside_count_equals_the_signed_distance_count():

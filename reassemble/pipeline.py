@@ -54,7 +54,8 @@ class Result:
     T_world : (n, 4, 4) T_world_fragment per fragment (:func:`assembly.world_poses`)
     touching : per contact of the assembly, the touching points of either fragment
     fracture : (faces,) bool per fragment, its break surface after the assembly: the
-        segmentation's labels where the fragment is not placed with others, else the
+        segmentation's labels where the fragment is not placed with others (the evidence's,
+        for a fragment matched by its whole surface), else the
         faces in contact (:func:`segmentation.labels_from_contact`)
     timings : seconds per step
     fallback : when the set was segmented again (planar mates, ``config.segment.fallback``):
@@ -336,8 +337,9 @@ def _break_surfaces(result: Result) -> list[np.ndarray]:
     for k, f in enumerate(result.fragments):
         seg = f.segmentation
         together = np.count_nonzero(a.group == a.group[k])
-        if seg is None or together < 2:
-            out.append(np.zeros(len(f.faces), bool) if seg is None else np.asarray(seg.fracture, bool).copy())
+        if seg is None or together < 2:  # alone: the evidence's labels (not a whole-surface retry's)
+            out.append(np.zeros(len(f.faces), bool) if seg is None else
+                       np.asarray(seg.fracture if seg.original is None else ~seg.original, bool).copy())
             continue
         out.append(labels_from_contact(seg, touching[k], keep_open=together < len(a.group)))
     return out

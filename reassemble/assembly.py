@@ -53,9 +53,9 @@ class AssemblyParams:
     verify_samples : samples per fragment when verifying a merge
     refine_levels : distance thresholds of the joint refinement, coarse to fine, multiples of
         the contact tolerance (:func:`refine`); refine_samples : fracture samples per fragment it uses
-    rim_reach : the refinement also aligns the rims of touching fragments within this
-        multiple of each level's threshold (0: contact alone; :func:`refine`); rim_weight :
-        their rows' weight in all, as a share of the contact rows'
+    rim_reach : the refinement's finest level also aligns the rims of touching fragments within
+        this multiple of its threshold (0: contact alone; :func:`refine`); rim_weight : their
+        rows' weight in all, as a share of the contact rows' 
     world_gap : space between the main assembly and the other sub-assemblies in the world
         frame (:func:`world_poses`)
     touching_points : touching points kept per contact, for the pictures (:func:`contact_points`)
@@ -712,10 +712,10 @@ def refine(
     Every pair of fragments contributes its fracture samples within a distance threshold
     (``levels`` times ``tol``, coarse to fine) of the other's, with opposed normals; all
     poses but the anchor's move at once (linearized rotations, damped least squares).
-    With ``rim_reach`` > 0, at every level each touching pair's rims
-    (:func:`features.rim_points`) within ``rim_reach`` times its threshold of each other
-    count too, across the rim: contact leaves a smooth break free to slide along its mate,
-    the shared outline does not.
+    With ``rim_reach`` > 0, at the finest threshold each touching pair's rims
+    (:func:`features.rim_points`) within ``rim_reach`` times it of each other count too,
+    across the rim: contact leaves a smooth break free to slide along its mate, the shared
+    outline does not.
 
     Parameters
     ----------
@@ -729,8 +729,8 @@ def refine(
     anchor : index of the fragment that stays fixed
     n_points : fracture samples per fragment used (the first: they are in random order)
     gap : separation kept between mating surfaces (mesh units; RegistrationParams.gap)
-    rim_reach : rim points match within this multiple of each level's threshold (0: rims
-        unused); rim_weight : their rows' weight in all, as a share of the contact
+    rim_reach : at the finest level, rim points match within this multiple of its threshold
+        (0: rims unused); rim_weight : their rows' weight in all, as a share of the contact
         rows' (light: they decide the motions contact leaves free, :func:`registration.icp`)
 
     Returns
@@ -753,7 +753,7 @@ def refine(
             # each source sample is matched to the target's surface moved out by the gap
             trees = {q: cKDTree(pts[q] + gap * nrm[q]) for q in {q for _, q in pairs}}
             rims = None
-            if rim_reach > 0:  # the coarse level too: its steps would move a sliding break at random
+            if rim_reach > 0 and finest:  # once contact has settled
                 rims = [None if s.rim is None or len(s.rim) < 6 else
                         (transform_points(T[k], s.rim), s.rim_directions @ T[k][:3, :3].T) for k, s in enumerate(surfaces)]
                 rims = [r if r is None else (*r, cKDTree(r[0])) for r in rims]

@@ -92,7 +92,9 @@ def reassemble(
     that work on instead). When the assembly leaves fragments unplaced, the set is
     segmented again, with the planar mates of its break faces labelled too and then with
     ``config.segment.fallback`` evidence, and matched and assembled again; the assembly
-    with most whole-surface contact is kept (:mod:`arbiter`); a set found thin-walled by the
+    with most whole-surface contact is kept (:mod:`arbiter`); a fragment still unplaced is
+    then matched by its whole surface (``config.segment.whole_retry``), kept the same way; a
+    set found thin-walled by the
     automatic test (``config.thin_walls`` None) is matched as solids too, kept the same way. With
     ``config.retrieval.min_fragments`` set, a large set registers candidate pairs only;
     fragments still unplaced in the kept assembly then ask for more partners until placed

@@ -24,10 +24,11 @@ from .files import check_output_folder, load_mesh, mesh_warning, resolve_mesh_pa
 from .inputs import load_fragments
 from .outputs import pairs_json, run_report, write_match_folder, write_run_folder
 from .pairs import PairMemo, match_pairs, match_set, registration_params
-from .prepare import DescribedSet, PreparedFragment, describe_fragments, prepare_fragments, reference_size, thin_walled
+from .prepare import (DescribedSet, PreparedFragment, describe_fragments, fracture_features, prepare_fragments,
+                      reference_size, thin_walled)
 from .puzzle import PuzzleFiles, break_to_folder, evaluate_files, read_puzzle
 from .retrieval import candidates_only, first_pairs, more_pairs, partner_votes
-from .segmentation import labels_from_contact
+from .segmentation import all_fracture, labels_from_contact
 
 log = logging.getLogger(__name__)
 
@@ -203,7 +204,12 @@ def _whole_surfaces(described: DescribedSet, result: Result, *, config: Config, 
         whole = tuple(sorted({*(segment.whole or ()), described.names[k]}))
         log.info("%s unplaced: matching it by its whole surface", described.names[k])
         asked = dataclasses.replace(config, thin_walls=False, segment=dataclasses.replace(segment, whole=whole))
-        again = _match(described, asked, jobs=jobs, scheduler=scheduler, progress=progress, memo=memo)
+        # the set's segmentation is the kept one's but for this fragment: only the features again
+        segs = [f.segmentation for f in result.fragments]
+        segs[k] = all_fracture(segs[k])
+        frags = fracture_features(described, segs, {}, shell=False, config=asked, seed=asked.seed)
+        again = _match(described, asked, jobs=jobs, scheduler=scheduler, progress=progress, memo=memo,
+                       fragments=frags)
         _assemble(again, limit=config.retrieval.max_partners, jobs=jobs, scheduler=scheduler, progress=progress,
                   memo=memo, groups=groups)
         tried.append(again)
@@ -231,14 +237,19 @@ def _better(first: Result, second: Result, *, config: Config) -> Result:
 
 
 def _match(described: DescribedSet, config: Config, *, jobs: int, scheduler: str | None, progress: bool,
-           unless: list[Result] = (), memo: PairMemo | None = None) -> Result | None:
+           unless: list[Result] = (), memo: PairMemo | None = None,
+           fragments: list[PreparedFragment] | None = None) -> Result | None:
     """The segment, features and pairs steps on a described set; None when the fracture
     labels are those of a result in ``unless`` (matching them again would change nothing).
+    ``fragments``: the set already segmented and featured with ``config`` (the pairs step only).
     With ``config.retrieval.min_fragments`` set, a set of that many fragments or more
     registers only candidate pairs: each fragment's best partners by votes (:mod:`retrieval`)."""
     t0 = time.perf_counter()
-    frags, size = prepare_fragments({}, config=config, seed=config.seed, jobs=jobs, scheduler=scheduler,
-                                    described=described)
+    if fragments is None:
+        frags, size = prepare_fragments({}, config=config, seed=config.seed, jobs=jobs, scheduler=scheduler,
+                                        described=described)
+    else:
+        frags, size = fragments, described.size
     if any(all(np.array_equal(a.segmentation.fracture, b.segmentation.fracture) for a, b in zip(frags, r.fragments)
                if a.segmentation is not None and b.segmentation is not None) for r in unless):
         return None
